@@ -1,0 +1,73 @@
+"""A camera: phase-mask lens plus sensor, as one differentiable torch module."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+
+from lenses.convolve import convolve
+from lenses.optics import Geometry, PupilModel, choose_geometry
+from lenses.sensor import Sensor
+from lenses.spec import LensSpec
+
+
+class Lens(torch.nn.Module):
+    """Scene radiance (B,3,H,W) in [0,1] -> sensor image (B,3,H,W) in [0,1].
+
+    `coefficients_um` (6,) holds the Noll Zernike coefficients of the mask thickness in um of
+    glass; it is a trainable parameter when the spec declares bounds. Grid sizes are fixed at
+    construction (from the bounds for trainable masks), so nothing changes shape while training.
+    """
+
+    def __init__(self, spec: LensSpec, geometry: Geometry | None = None):
+        super().__init__()
+        self.spec = spec
+        if geometry is None:
+            geometry, fraction = choose_geometry(spec)
+            self.initial_energy_fraction = fraction
+        self.geometry = geometry
+        self.coefficients_um = torch.nn.Parameter(torch.tensor(spec.mask.zernike_um, dtype=torch.float32),
+                                                  requires_grad=spec.mask.trainable)
+        self.pupil = PupilModel(spec, geometry)
+        self.sensor = Sensor(spec.sensor, spec.optics.aperture_diameter_mm)
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    def psf_and_energy(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """PSF (3,K,K) with channels R,G,B each summing to 1, and the energy fraction (3,) it holds."""
+        return self.pupil(self.coefficients_um)
+
+    def psf(self) -> torch.Tensor:
+        """PSF (3,K,K), sensor-pixel sampling, each channel sums to 1; ideal peak at [K//2, K//2]."""
+        return self.psf_and_energy()[0]
+
+    def gain(self) -> torch.Tensor:
+        """Expected sensor value per unit scene radiance, per channel (3,) (QE and exposure tint)."""
+        return self.sensor.gain()
+
+    def irradiance(self, x: torch.Tensor) -> torch.Tensor:
+        """Noise-free optical image on the sensor (B,3,H,W): the scene convolved with the PSF."""
+        return convolve(x, self.psf().to(x.device))
+
+    def forward(self, x: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
+        if x.ndim != 4 or x.shape[1] != 3:
+            raise ValueError(f"lens input must be (B,3,H,W) scene radiance, got shape {tuple(x.shape)}")
+        return self.sensor(self.irradiance(x), generator=generator)
+
+    @torch.no_grad()
+    def clamp_to_bounds(self) -> None:
+        """Project the coefficients back inside the bounds the spec declares (after an optimiser step)."""
+        if self.spec.mask.bounds_um is None:
+            return
+        lo, hi = (torch.tensor(b, dtype=self.coefficients_um.dtype, device=self.coefficients_um.device)
+                  for b in zip(*self.spec.mask.bounds_um))
+        self.coefficients_um.copy_(torch.maximum(torch.minimum(self.coefficients_um, hi), lo))
+
+    def current_spec(self) -> LensSpec:
+        """The spec with the current coefficients (a learned lens is itself a spec)."""
+        mask = dataclasses.replace(self.spec.mask, zernike_um=tuple(float(c) for c in self.coefficients_um.detach().cpu()),
+                                   random_seed=None)
+        return dataclasses.replace(self.spec, mask=mask)
