@@ -1,0 +1,56 @@
+"""Provenance stamped on every result row: where a number came from."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import platform
+import subprocess
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+
+import torch
+
+_PACKAGES = ("torch", "torchvision", "numpy", "scipy", "scikit-image", "opencv-python-headless",
+             "transformers", "easyocr", "onnxruntime", "privacy-lens-bench")
+
+
+def git_commit() -> str:
+    """HEAD commit of the source tree (with '-dirty' when it has uncommitted changes), or 'unknown'."""
+    here = Path(__file__).resolve().parent
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True,
+                                timeout=5, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
+                               capture_output=True, text=True, timeout=5).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return commit + ("-dirty" if dirty else "")
+
+
+def package_versions() -> str:
+    """'name=version;...' of the packages that shape the numbers (flat, for a flat row)."""
+    out = []
+    for name in _PACKAGES:
+        try:
+            out.append(f"{name}={version(name)}")
+        except PackageNotFoundError:
+            continue
+    return ";".join(out)
+
+
+def describe_device(device: str) -> str:
+    if device.startswith("cuda") and torch.cuda.is_available():
+        return f"{device}:{torch.cuda.get_device_name(torch.device(device))}"
+    return f"cpu:{platform.processor() or platform.machine()}"
+
+
+def provenance(device: str) -> dict[str, object]:
+    """The run-wide provenance fields of a row (config hash, seed and wall time are per row)."""
+    return {
+        "git_commit": git_commit(),
+        "packages": package_versions(),
+        "python": platform.python_version(),
+        "device": describe_device(device),
+        "threads": torch.get_num_threads(),
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }

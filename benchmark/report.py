@@ -1,0 +1,90 @@
+"""Run outputs: results.json, table.md, table.csv and the sample-image grid per lens."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from benchmark.cache import atomic_write_text  # noqa: E402
+
+SCHEMA_VERSION = 1
+ID_COLUMNS = ["lens", "attack", "profile", "scenes"]
+METRIC_COLUMNS = ["threat_model", "psnr_db", "ssim", "miou", "mean_acc", "overall_acc", "plate_acc", "plate_cer",
+                  "n_plates", "psf_size_px", "psf_energy", "fit_s", "images_per_s"]
+
+
+def write_results(out: Path, rows: list[dict], meta: dict) -> Path:
+    """results.json: {"schema_version", "meta" (profile values, command), "rows": [flat rows]}."""
+    path = Path(out) / "results.json"
+    atomic_write_text(path, json.dumps({"schema_version": SCHEMA_VERSION, "meta": meta, "rows": rows},
+                                       indent=1, default=str, allow_nan=True))
+    return path
+
+
+def summary_table(rows: list[dict]) -> pd.DataFrame:
+    """One line per (lens, attack, profile, scenes): metric means, with std over seeds when several."""
+    df = pd.DataFrame(rows)
+    metrics = [c for c in METRIC_COLUMNS if c in df.columns and c != "threat_model"]
+    group = df.groupby(ID_COLUMNS, sort=False)
+    table = group[metrics].mean()
+    seeds = group["seed"].nunique()
+    if int(seeds.max()) > 1:
+        std = group[metrics].std(ddof=1).add_suffix("_std")
+        table = table.join(std)
+    if "threat_model" in df.columns:
+        table.insert(0, "threat_model", group["threat_model"].first())
+    table.insert(0, "seeds", seeds)
+    return table.reset_index().dropna(axis=1, how="all")
+
+
+def _fmt(v: object) -> str:
+    if isinstance(v, float):
+        if math.isnan(v):
+            return ""
+        return f"{v:.3f}" if abs(v) < 100 else f"{v:.1f}"
+    return "" if v is None else str(v)
+
+
+def write_tables(out: Path, rows: list[dict]) -> pd.DataFrame:
+    """table.csv (every row, full precision) and table.md (the seed summary, rounded)."""
+    out = Path(out)
+    atomic_write_text(out / "table.csv", pd.DataFrame(rows).to_csv(index=False))
+    table = summary_table(rows)
+    atomic_write_text(out / "table.md", table.map(_fmt).to_markdown(index=False) + "\n")
+    return table
+
+
+def _psf_rgb(psf: np.ndarray) -> np.ndarray:
+    """(3,K,K) PSF -> RGB image, log-scaled over 3 decades so the rings show."""
+    p = np.log10(np.maximum(psf / psf.max(), 1e-3)) / 3.0 + 1.0
+    return np.clip(p.transpose(1, 2, 0), 0, 1)
+
+
+def write_sample_grid(path: Path, lens_name: str, psf: np.ndarray, scene: np.ndarray, sensor: np.ndarray,
+                      restored: dict[str, np.ndarray], scores: dict[str, str]) -> None:
+    """One PNG: scene, PSF (log scale), sensor image, then each restorer's output with its score."""
+    panels = [("scene", scene), (f"PSF {psf.shape[-1]}x{psf.shape[-1]} px (log)", _psf_rgb(psf)),
+              ("sensor", sensor)]
+    panels += [(f"{name}\n{scores.get(name, '')}", img) for name, img in restored.items()]
+    cols = min(4, len(panels))
+    rows = math.ceil(len(panels) / cols)
+    aspect = scene.shape[0] / scene.shape[1]
+    fig, axes = plt.subplots(rows, cols, figsize=(4 * cols, 4 * aspect * rows + 0.6 * rows), squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    for ax, (title, img) in zip(axes.flat, panels):
+        ax.imshow(np.clip(img, 0, 1), interpolation="nearest" if "PSF" in title else "antialiased")
+        ax.set_title(title, fontsize=9)
+    fig.suptitle(f"lens: {lens_name}", fontsize=11)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)

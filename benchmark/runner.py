@@ -1,0 +1,162 @@
+"""The benchmark runner: scenes -> lens -> sensor images -> attackers -> rows.
+
+One row per lens x attack chain x seed. The runner, not the attacker, computes every metric, so
+all attackers are scored the same way. Every reader runs on the sensor image and on every
+restorer's output (the chained attack: deblur, then read).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+import attacks
+import lenses
+from benchmark.cache import cache_root, config_hash
+from benchmark.metrics import finite_mean, psnr, ssim
+from benchmark.profiles import Profile
+from benchmark.provenance import provenance
+from benchmark.scenes import Scene, load_scenes
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class RunConfig:
+    lenses: list[str]
+    attacks: list[str] | None  # None: every registered attacker
+    scenes: str
+    profile: Profile
+    seeds: list[int]
+    device: str = "cpu"
+    cache_dir: Path = field(default_factory=cache_root)
+
+
+@dataclass
+class LensOutcome:
+    """What one lens produced for one seed: rows plus the images the report draws."""
+
+    lens: lenses.Lens
+    rows: list[dict]
+    scene: np.ndarray
+    sensor: np.ndarray
+    restored: dict[str, np.ndarray]
+
+
+def to_tensor(scenes: list[Scene]) -> torch.Tensor:
+    """Scene images -> (N,3,H,W) float32 in [0,1]."""
+    return torch.from_numpy(np.stack([s.image for s in scenes])).permute(0, 3, 1, 2).contiguous()
+
+
+def batches(x: torch.Tensor, size: int) -> Iterator[torch.Tensor]:
+    for i in range(0, x.shape[0], size):
+        yield x[i:i + size]
+
+
+def sense(lens: lenses.Lens, sharp: torch.Tensor, batch_size: int, seed: int, device: str) -> torch.Tensor:
+    """Sensor images of `sharp` through `lens`, noise drawn from a generator seeded with `seed`."""
+    gen = torch.Generator(device=device).manual_seed(seed)
+    with torch.no_grad():
+        return torch.cat([lens(b.to(device), generator=gen).cpu() for b in batches(sharp, batch_size)])
+
+
+def train_pairs_factory(lens: lenses.Lens, cfg: RunConfig, seed: int) -> Callable[[], Iterator[tuple[torch.Tensor, torch.Tensor]]]:
+    """A re-iterable source of (sensor, sharp) crops from the TRAIN split, for attackers that fit."""
+    p = cfg.profile
+    cached: list[torch.Tensor] = []
+
+    def pairs() -> Iterator[tuple[torch.Tensor, torch.Tensor]]:
+        if not cached:
+            cached.append(to_tensor(load_scenes(cfg.scenes, "train", p.n_train, p.image_size, seed)))
+        sharp_all = cached[0]
+        rng = np.random.default_rng([seed, 1])
+        gen = torch.Generator(device=cfg.device).manual_seed(seed + 1)
+        h, w = p.train_crop
+        for start in range(0, sharp_all.shape[0], p.batch_size):
+            crops = []
+            for img in sharp_all[start:start + p.batch_size]:
+                y = int(rng.integers(0, img.shape[1] - h + 1))
+                x = int(rng.integers(0, img.shape[2] - w + 1))
+                crops.append(img[:, y:y + h, x:x + w])
+            sharp = torch.stack(crops).to(cfg.device)
+            with torch.no_grad():
+                yield lens(sharp, generator=gen), sharp
+
+    return pairs
+
+
+def _row(lens_name: str, attack: str, seed: int, cfg: RunConfig, metrics: dict, config: dict, prov: dict) -> dict:
+    row = {"lens": lens_name, "attack": attack, "seed": seed, "profile": cfg.profile.name, "scenes": cfg.scenes}
+    row.update(metrics)
+    row["config_hash"] = config_hash(config)
+    row.update(prov)
+    return row
+
+
+def restoration_metrics(restored: torch.Tensor, sharp: torch.Tensor) -> dict:
+    return {"psnr_db": finite_mean(psnr(restored, sharp)), "ssim": finite_mean(ssim(restored, sharp)),
+            "n_images": int(sharp.shape[0])}
+
+
+def run_lens(lens_name: str, seed: int, cfg: RunConfig, sharp: torch.Tensor,
+             attackers: list[attacks.Attack], prov: dict) -> LensOutcome:
+    """Everything for one lens and one seed."""
+    p = cfg.profile
+    lens = lenses.load(lens_name, profile=p, seed=seed, device=cfg.device, cache_dir=cfg.cache_dir).to(cfg.device)
+    base_config = {"lens": lens.current_spec().to_dict(), "profile": p.to_dict(), "scenes": cfg.scenes, "seed": seed}
+    t0 = time.perf_counter()
+    sensor = sense(lens, sharp, p.batch_size, seed, cfg.device)
+    lens_s = time.perf_counter() - t0
+    rows = [_row(lens_name, "lens", seed, cfg,
+                 {"images_per_s": sharp.shape[0] / lens_s, "psf_size_px": lens.geometry.psf_size_px,
+                  "psf_energy": float(lens.psf_and_energy()[1].min())},
+                 {**base_config, "attack": "lens"}, prov)]
+    ctx = attacks.FitContext(lens=lens, train_pairs=train_pairs_factory(lens, cfg, seed),
+                             cache_dir=cfg.cache_dir / "attacks", device=cfg.device, seed=seed, profile=p)
+    restored: dict[str, torch.Tensor] = {}
+    for attacker in tqdm([a for a in attackers if isinstance(a, attacks.Restorer)], desc=f"{lens_name} restorers",
+                         leave=False):
+        t0 = time.perf_counter()
+        attacker.fit(ctx)
+        fit_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        with torch.no_grad():
+            out = torch.cat([attacker.restore(b.to(cfg.device)).cpu() for b in batches(sensor, p.batch_size)])
+        run_s = time.perf_counter() - t0
+        restored[attacker.name] = out
+        metrics = restoration_metrics(out, sharp)
+        metrics.update({"threat_model": attacker.threat_model.value, "fit_s": fit_s,
+                        "images_per_s": sharp.shape[0] / run_s})
+        rows.append(_row(lens_name, attacker.name, seed, cfg, metrics,
+                         {**base_config, "attack": attacker.describe()}, prov))
+    as_hwc = lambda t: t[0].permute(1, 2, 0).clamp(0, 1).numpy()  # noqa: E731
+    return LensOutcome(lens, rows, as_hwc(sharp), as_hwc(sensor), {k: as_hwc(v) for k, v in restored.items()})
+
+
+def run(cfg: RunConfig, on_lens: Callable[[LensOutcome, int], None] | None = None) -> list[dict]:
+    """All rows of a run. `on_lens(outcome, seed)` is called after each lens (for pictures)."""
+    selected, failures = attacks.load_all(cfg.attacks)
+    for f in failures:
+        log.warning("attacker plugin %r failed to load and is skipped: %s", f.name, f.error)
+    prov = provenance(cfg.device)
+    rows: list[dict] = []
+    for seed in cfg.seeds:
+        torch.manual_seed(seed)
+        sharp = to_tensor(load_scenes(cfg.scenes, "val", cfg.profile.n_val, cfg.profile.image_size, seed))
+        for lens_name in tqdm(cfg.lenses, desc=f"seed {seed}: lenses"):
+            t0 = time.perf_counter()
+            outcome = run_lens(lens_name, seed, cfg, sharp, selected, prov)
+            wall = time.perf_counter() - t0
+            for r in outcome.rows:
+                r["wall_s"] = wall
+            rows.extend(outcome.rows)
+            if on_lens is not None:
+                on_lens(outcome, seed)
+    return rows
