@@ -1,0 +1,49 @@
+"""Attackers: pluggable adversaries that try to recover private content from sensor images.
+
+Restorers rebuild the sharp scene (``Restorer.restore``); readers pull licence-plate strings
+out of an image (``Reader.read``). Attackers register in the entry-point group
+``privacy_lens_bench.attacks`` (built-ins included) and are loaded lazily by name::
+
+    import attacks
+    a = attacks.load("wiener-known-psf")
+    a.fit(attacks.FitContext(lens=lens))
+    x_hat = a.restore(sensor)            # (B, 3, H, W) in [0, 1] -> same
+
+Importing this package imports no attacker; ``attacks.available()`` lists them.
+"""
+
+from attacks.base import (
+    Attack,
+    FitContext,
+    LensLike,
+    MissingRequirementError,
+    PlateRead,
+    Reader,
+    Restorer,
+    ThreatModel,
+)
+from attacks.registry import (
+    DuplicatePluginError,
+    PluginFailure,
+    UnknownAttackError,
+    available,
+    load,
+    load_all,
+)
+
+__all__ = [
+    "Attack",
+    "DuplicatePluginError",
+    "FitContext",
+    "LensLike",
+    "MissingRequirementError",
+    "PlateRead",
+    "PluginFailure",
+    "Reader",
+    "Restorer",
+    "ThreatModel",
+    "UnknownAttackError",
+    "available",
+    "load",
+    "load_all",
+]

@@ -1,0 +1,229 @@
+"""Plugin discovery through entry points, generic over the group.
+
+Built-in and third-party plugins register the same way: an entry point in a group such as
+``privacy_lens_bench.attacks`` or ``privacy_lens_bench.lenses`` (ours are declared in this
+project's ``pyproject.toml``). Discovery reads installed metadata only and imports nothing, so
+a broken plugin costs nothing until it is asked for. ``lenses`` reuses ``discover``,
+``suggest`` and ``import_from_file`` for its own group; the rest of this module is the
+attacker registry built on them (``attacks.load``, ``attacks.available``, ``attacks.load_all``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import hashlib
+import importlib.util
+import logging
+import sys
+from importlib.metadata import EntryPoint, entry_points
+from pathlib import Path
+
+from attacks.base import Attack
+
+__all__ = [
+    "ATTACKS_GROUP",
+    "DuplicatePluginError",
+    "PluginFailure",
+    "UnknownAttackError",
+    "UnknownPluginError",
+    "available",
+    "discover",
+    "import_from_file",
+    "load",
+    "load_all",
+    "source_of",
+    "suggest",
+]
+
+ATTACKS_GROUP = "privacy_lens_bench.attacks"
+
+logger = logging.getLogger(__name__)
+
+
+class DuplicatePluginError(RuntimeError):
+    """Two entry points in one group share a name, so which one a name means is ambiguous."""
+
+
+class UnknownPluginError(LookupError, ValueError):
+    """A name is not registered in a group (or a file/attribute spec does not resolve)."""
+
+
+def source_of(ep: EntryPoint) -> str:
+    """Human-readable origin of an entry point: ``'<distribution> <version> (module:attr)'``."""
+    dist = ep.dist
+    where = f"{dist.name} {dist.version}" if dist is not None else "<unknown distribution>"
+    return f"{where} ({ep.value})"
+
+
+def discover(group: str) -> dict[str, EntryPoint]:
+    """All entry points of ``group`` from every installed distribution, by name, unloaded.
+
+    Raises:
+        DuplicatePluginError: Two distributions register the same name; the message names both.
+    """
+    found: dict[str, EntryPoint] = {}
+    for ep in entry_points(group=group):
+        if ep.name in found:
+            raise DuplicatePluginError(
+                f"{group}: name {ep.name!r} is registered twice, by {source_of(found[ep.name])} "
+                f"and by {source_of(ep)}; uninstall or rename one of them"
+            )
+        found[ep.name] = ep
+    return found
+
+
+def suggest(name: str, choices: list[str] | set[str] | dict[str, object]) -> list[str]:
+    """Up to three of ``choices`` that look like ``name``: close spellings (difflib) first,
+    then names that contain ``name`` or start with it (so "wiener" finds "wiener-known-psf")."""
+    pool = sorted(choices)
+    close = difflib.get_close_matches(name, pool, n=3, cutoff=0.6)
+    partial = [c for c in pool if c not in close and (name in c or c.startswith(name))]
+    return (close + partial)[:3]
+
+
+def import_from_file(spec: str) -> object:
+    """Import ``'path/to/file.py:Attr'`` and return ``Attr``.
+
+    The module is registered in ``sys.modules`` under a name derived from its absolute path, so
+    importing the same file twice gives the same objects (and pickling of its classes works).
+
+    Raises:
+        UnknownPluginError: The spec has no ``:Attr``, the file does not exist, or it lacks
+            ``Attr``. Errors raised while executing the module propagate unchanged.
+    """
+    path_part, sep, attr = spec.rpartition(":")
+    if not sep or not path_part or not attr:
+        raise UnknownPluginError(f"{spec!r}: expected 'path/to/file.py:Name'")
+    path = Path(path_part).expanduser().resolve()
+    if not path.is_file():
+        raise UnknownPluginError(f"{spec!r}: file {str(path)!r} does not exist")
+    module_name = f"_plb_plugin_{path.stem}_{hashlib.sha1(str(path).encode()).hexdigest()[:12]}"
+    module = sys.modules.get(module_name)
+    if module is None:
+        module_spec = importlib.util.spec_from_file_location(module_name, path)
+        if module_spec is None or module_spec.loader is None:
+            raise UnknownPluginError(f"{spec!r}: {str(path)!r} is not an importable Python file")
+        module = importlib.util.module_from_spec(module_spec)
+        sys.modules[module_name] = module
+        try:
+            module_spec.loader.exec_module(module)
+        except BaseException:
+            del sys.modules[module_name]
+            raise
+    try:
+        return getattr(module, attr)
+    except AttributeError:
+        public = sorted(n for n in vars(module) if not n.startswith("_"))
+        raise UnknownPluginError(
+            f"{spec!r}: {str(path)!r} defines no {attr!r}; it defines {public}"
+        ) from None
+
+
+class UnknownAttackError(UnknownPluginError):
+    """``attacks.load`` was given a name that no installed distribution registers."""
+
+
+@dataclasses.dataclass(frozen=True)
+class PluginFailure:
+    """An attacker that could not be loaded and was skipped.
+
+    Attributes:
+        name: The registered name or file spec that failed.
+        error: ``'<ExceptionType>: <message>'`` of what went wrong.
+    """
+
+    name: str
+    error: str
+
+
+def available() -> dict[str, str]:
+    """Registered attackers as ``{name: 'module:attr'}``, without importing any of them.
+
+    Raises:
+        DuplicatePluginError: Two distributions register the same name.
+    """
+    return {name: ep.value for name, ep in sorted(discover(ATTACKS_GROUP).items())}
+
+
+def load(spec: str, **options: object) -> Attack:
+    """Create an attacker from a registered name or a ``'path/to/file.py:ClassName'`` spec.
+
+    Args:
+        spec: A name from ``available()`` or a file spec (``'<path>.py:<attribute>'``).
+        **options: Keyword arguments for the attacker's constructor.
+
+    Raises:
+        UnknownAttackError: Unknown name (the message lists registered names and close
+            matches), or a file spec whose file or class does not exist.
+        DuplicatePluginError: Two distributions register the same name.
+        TypeError: The object is not an ``Attack`` subclass, or its ``name`` differs from
+            the name it is registered under.
+    """
+    return _load(spec, discover(ATTACKS_GROUP), options)
+
+
+def load_all(names: list[str] | None = None) -> tuple[list[Attack], list[PluginFailure]]:
+    """Load several attackers one at a time; those that fail are skipped, not fatal.
+
+    Args:
+        names: Names or file specs to load, in order; None loads every registered attacker
+            in name order.
+
+    Returns:
+        The attackers that loaded, and one ``PluginFailure`` per attacker that raised while
+        importing or constructing (each also logged as a warning naming it).
+
+    Raises:
+        UnknownAttackError: A requested name is not registered, or a requested file spec does
+            not resolve: a typo by the caller, not a broken plugin.
+        DuplicatePluginError: Two distributions register the same name.
+    """
+    registered = discover(ATTACKS_GROUP)
+    requested = sorted(registered) if names is None else list(names)
+    for name in requested:
+        if not _is_file_spec(name) and name not in registered:
+            raise _unknown(name, registered)
+    loaded: list[Attack] = []
+    failures: list[PluginFailure] = []
+    for name in requested:
+        try:
+            loaded.append(_load(name, registered, {}))
+        except UnknownPluginError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - any plugin bug must not take the run down
+            failure = PluginFailure(name, f"{type(exc).__name__}: {exc}")
+            logger.warning("attacker %r failed to load and is skipped: %s", name, failure.error)
+            failures.append(failure)
+    return loaded, failures
+
+
+def _load(spec: str, registered: dict[str, EntryPoint], options: dict[str, object]) -> Attack:
+    if _is_file_spec(spec):
+        obj, origin, registered_name = import_from_file(spec), spec, None
+    elif spec in registered:
+        ep = registered[spec]
+        obj, origin, registered_name = ep.load(), source_of(ep), spec
+    else:
+        raise _unknown(spec, registered)
+    if not (isinstance(obj, type) and issubclass(obj, Attack)):
+        raise TypeError(f"{origin}: {obj!r} is not a subclass of attacks.Attack")
+    if registered_name is not None and getattr(obj, "name", None) != registered_name:
+        raise TypeError(
+            f"{origin}: registered as {registered_name!r} but its class attribute "
+            f"name is {getattr(obj, 'name', None)!r}; they must match (results are keyed by it)"
+        )
+    return obj(**options)
+
+
+def _is_file_spec(spec: str) -> bool:
+    return ".py:" in spec
+
+
+def _unknown(name: str, registered: dict[str, EntryPoint]) -> UnknownAttackError:
+    hint = suggest(name, registered)
+    did_you_mean = f" Did you mean {', '.join(map(repr, hint))}?" if hint else ""
+    return UnknownAttackError(
+        f"unknown attacker {name!r}.{did_you_mean} Registered ({ATTACKS_GROUP}): "
+        f"{sorted(registered)}; or pass 'path/to/file.py:ClassName'."
+    )

@@ -1,0 +1,49 @@
+"""One contract for every registered attacker (the timm pattern): a new plugin gets it free."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import pytest
+import torch
+
+import attacks
+
+REGISTERED = sorted(attacks.available())
+
+
+@pytest.fixture
+def context(fake_lens, tmp_path):
+    def pairs():
+        g = torch.Generator().manual_seed(0)
+        sharp = torch.rand(2, 3, 32, 32, generator=g)
+        yield sharp * 0.5, sharp
+
+    return attacks.FitContext(lens=fake_lens, train_pairs=pairs, cache_dir=tmp_path, device="cpu", seed=0)
+
+
+@pytest.mark.parametrize("name", REGISTERED)
+def test_attack_contract(name, context):
+    attack = attacks.load(name)
+    assert isinstance(attack, attacks.Attack) and attack.name == name
+    assert isinstance(attack.threat_model, attacks.ThreatModel)
+    assert set(attack.requires) <= {f.name for f in dataclasses.fields(attacks.FitContext)}
+    attack.fit(context)
+    description = attack.describe()
+    assert description["name"] == name
+    json.dumps(description)  # provenance must be serializable
+
+
+@pytest.mark.parametrize("name", REGISTERED)
+def test_restorer_contract(name, context):
+    attack = attacks.load(name)
+    if not isinstance(attack, attacks.Restorer):
+        pytest.skip(f"{name} is not a restorer")
+    attack.fit(context)
+    sensor = torch.rand(2, 3, 40, 56, generator=torch.Generator().manual_seed(1))
+    with torch.no_grad():
+        first, second = attack.restore(sensor), attack.restore(sensor.clone())
+    assert first.shape == sensor.shape and first.dtype == sensor.dtype
+    assert first.min() >= 0 and first.max() <= 1
+    assert torch.equal(first, second)
