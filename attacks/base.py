@@ -25,6 +25,7 @@ __all__ = [
     "LensLike",
     "MissingRequirementError",
     "PlateRead",
+    "ReadHints",
     "Reader",
     "Restorer",
     "ThreatModel",
@@ -104,6 +105,22 @@ class PlateRead:
     score: float
 
 
+@dataclasses.dataclass(frozen=True)
+class ReadHints:
+    """What the runner may hand a reader besides the images.
+
+    Attributes:
+        vehicle_boxes: Ground-truth vehicle boxes (x0, y0, x1, y1) per image, for an attacker's
+            upper bound (an ``oracle`` vehicle stage); None when not offered.
+        segment: A segmentation network as a callable, images (B, 3, H, W) in [0, 1] ->
+            Cityscapes train ids (B, H, W): the lens's own utility network for sensor images, a
+            clean-trained one for sharp or restored images; None when there is none.
+    """
+
+    vehicle_boxes: list[list[tuple[float, float, float, float]]] | None = None
+    segment: Callable[[Tensor], Tensor] | None = None
+
+
 class Attack(ABC):
     """Base of every attacker.
 
@@ -139,6 +156,11 @@ class Attack(ABC):
                 f"attacker {self.name!r} ({self.threat_model.value}) requires FitContext "
                 f"field(s) {missing}, but they are None"
             )
+
+    def skip_reason(self, ctx: FitContext) -> str | None:
+        """Why this attacker does not apply to this context (e.g. no co-design adversary for a
+        fixed lens), or None when it applies. The runner skips it with this message."""
+        return None
 
     def fit(self, ctx: FitContext) -> None:
         """Prepare the attacker (measure, train, load weights). The default only checks
@@ -186,11 +208,12 @@ class Reader(Attack):
     """An attacker that reads licence plates from images."""
 
     @abstractmethod
-    def read(self, images: Tensor) -> list[list[PlateRead]]:
+    def read(self, images: Tensor, hints: ReadHints | None = None) -> list[list[PlateRead]]:
         """Read every plate in every image.
 
         Args:
             images: Images, shape (B, 3, H, W), values in [0, 1] (sensor or restored).
+            hints: Optional side information for the stages that use it (``ReadHints``).
 
         Returns:
             One list of ``PlateRead`` per image (empty when nothing was read), length B.

@@ -97,9 +97,11 @@ def cmd_run(args: argparse.Namespace) -> int:
                                  outcome.restored, scores)
 
     t0 = time.perf_counter()
-    rows = runner.run(cfg, on_lens=pictures)
+    rows, plates = runner.run(cfg, on_lens=pictures)
     meta = {"command": sys.argv, "profile": profile.to_dict(), "wall_s": time.perf_counter() - t0}
     report.write_results(out, rows, meta)
+    if plates:
+        report.write_plate_records(out, plates)
     table = report.write_tables(out, rows)
     print((out / "table.md").read_text())
     print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({len(table)} table rows, "

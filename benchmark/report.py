@@ -18,7 +18,7 @@ from benchmark.cache import atomic_write_text  # noqa: E402
 SCHEMA_VERSION = 1
 ID_COLUMNS = ["lens", "attack", "profile", "scenes"]
 METRIC_COLUMNS = ["threat_model", "psnr_db", "ssim", "miou", "mean_acc", "overall_acc", "plate_acc", "plate_cer",
-                  "n_plates", "psf_size_px", "psf_energy", "fit_s", "images_per_s"]
+                  "plate_det", "n_plates", "psf_size_px", "psf_energy", "fit_s", "images_per_s"]
 
 
 def write_results(out: Path, rows: list[dict], meta: dict) -> Path:
@@ -26,6 +26,13 @@ def write_results(out: Path, rows: list[dict], meta: dict) -> Path:
     path = Path(out) / "results.json"
     atomic_write_text(path, json.dumps({"schema_version": SCHEMA_VERSION, "meta": meta, "rows": rows},
                                        indent=1, default=str, allow_nan=True))
+    return path
+
+
+def write_plate_records(out: Path, records: list[dict]) -> Path:
+    """plates.csv: one line per (lens, chain, seed, readable plate): truth, width, read, correct, cer."""
+    path = Path(out) / "plates.csv"
+    atomic_write_text(path, pd.DataFrame(records).to_csv(index=False))
     return path
 
 

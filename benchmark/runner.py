@@ -21,6 +21,7 @@ import attacks
 import lenses
 from benchmark.cache import cache_root, config_hash
 from benchmark.metrics import finite_mean, psnr, ssim
+from benchmark.plates import PlateOutcome, score_scene, summarise
 from benchmark.profiles import Profile
 from benchmark.provenance import provenance
 from benchmark.scenes import Scene, load_scenes
@@ -48,6 +49,7 @@ class LensOutcome:
     scene: np.ndarray
     sensor: np.ndarray
     restored: dict[str, np.ndarray]
+    plates: list[dict] = field(default_factory=list)  # one record per (chain, readable plate)
 
 
 def to_tensor(scenes: list[Scene]) -> torch.Tensor:
@@ -105,7 +107,35 @@ def restoration_metrics(restored: torch.Tensor, sharp: torch.Tensor) -> dict:
             "n_images": int(sharp.shape[0])}
 
 
-def run_lens(lens_name: str, seed: int, cfg: RunConfig, sharp: torch.Tensor,
+def read_plates(reader: attacks.Reader, images: torch.Tensor, scenes: list[Scene], batch_size: int,
+                device: str, segment: Callable[[torch.Tensor], torch.Tensor] | None = None
+                ) -> tuple[list[PlateOutcome], float]:
+    """Run a reader over images (batch-wise) and score it against the scenes' plates.
+
+    Returns the per-plate outcomes and the reader's images per second.
+    """
+    outcomes: list[PlateOutcome] = []
+    t0 = time.perf_counter()
+    for start in range(0, images.shape[0], batch_size):
+        chunk = scenes[start:start + batch_size]
+        hints = attacks.ReadHints(vehicle_boxes=[[v.box_xyxy for v in s.vehicles] for s in chunk], segment=segment)
+        with torch.no_grad():
+            reads = reader.read(images[start:start + batch_size].to(device), hints)
+        for r, scene in zip(reads, chunk):
+            outcomes.extend(score_scene(r, scene))
+    return outcomes, images.shape[0] / (time.perf_counter() - t0)
+
+
+def plate_rows(lens_name: str, attack: str, seed: int, cfg: RunConfig, outcomes: list[PlateOutcome],
+               speed: float, reader: attacks.Reader, config: dict, prov: dict) -> tuple[dict, list[dict]]:
+    """The row of one reader chain, and its per-plate records (for charts and galleries)."""
+    metrics = {"threat_model": reader.threat_model.value, **summarise(outcomes), "images_per_s": speed}
+    row = _row(lens_name, attack, seed, cfg, metrics, {**config, "attack": attack, "reader": reader.describe()}, prov)
+    records = [{"lens": lens_name, "attack": attack, "seed": seed, **o.__dict__} for o in outcomes]
+    return row, records
+
+
+def run_lens(lens_name: str, seed: int, cfg: RunConfig, sharp: torch.Tensor, scenes: list[Scene],
              attackers: list[attacks.Attack], prov: dict) -> LensOutcome:
     """Everything for one lens and one seed."""
     p = cfg.profile
@@ -123,6 +153,10 @@ def run_lens(lens_name: str, seed: int, cfg: RunConfig, sharp: torch.Tensor,
     restored: dict[str, torch.Tensor] = {}
     for attacker in tqdm([a for a in attackers if isinstance(a, attacks.Restorer)], desc=f"{lens_name} restorers",
                          leave=False):
+        reason = attacker.skip_reason(ctx)
+        if reason:
+            log.info("%s on %s skipped: %s", attacker.name, lens_name, reason)
+            continue
         t0 = time.perf_counter()
         attacker.fit(ctx)
         fit_s = time.perf_counter() - t0
@@ -136,27 +170,70 @@ def run_lens(lens_name: str, seed: int, cfg: RunConfig, sharp: torch.Tensor,
                         "images_per_s": sharp.shape[0] / run_s})
         rows.append(_row(lens_name, attacker.name, seed, cfg, metrics,
                          {**base_config, "attack": attacker.describe()}, prov))
+    plates: list[dict] = []
+    for reader in [a for a in attackers if isinstance(a, attacks.Reader)]:
+        reason = reader.skip_reason(ctx)
+        if reason:
+            log.info("%s on %s skipped: %s", reader.name, lens_name, reason)
+            continue
+        reader.fit(ctx)
+        sources = {reader.name: sensor, **{f"{name}>{reader.name}": out for name, out in restored.items()}}
+        for chain, images in tqdm(sources.items(), desc=f"{lens_name} {reader.name}", leave=False):
+            outcomes, speed = read_plates(reader, images, scenes, p.batch_size, cfg.device)
+            row, records = plate_rows(lens_name, chain, seed, cfg, outcomes, speed, reader, base_config, prov)
+            rows.append(row)
+            plates.extend(records)
     as_hwc = lambda t: t[0].permute(1, 2, 0).clamp(0, 1).numpy()  # noqa: E731
-    return LensOutcome(lens, rows, as_hwc(sharp), as_hwc(sensor), {k: as_hwc(v) for k, v in restored.items()})
+    return LensOutcome(lens, rows, as_hwc(sharp), as_hwc(sensor), {k: as_hwc(v) for k, v in restored.items()},
+                       plates)
 
 
-def run(cfg: RunConfig, on_lens: Callable[[LensOutcome, int], None] | None = None) -> list[dict]:
-    """All rows of a run. `on_lens(outcome, seed)` is called after each lens (for pictures)."""
+def sharp_reference(seed: int, cfg: RunConfig, sharp: torch.Tensor, scenes: list[Scene],
+                    attackers: list[attacks.Attack], prov: dict) -> tuple[list[dict], list[dict]]:
+    """Reader rows on the sharp scenes themselves (lens `sharp`, the paper's "Original")."""
+    rows, plates = [], []
+    config = {"lens": "sharp", "profile": cfg.profile.to_dict(), "scenes": cfg.scenes, "seed": seed}
+    ctx = attacks.FitContext(cache_dir=cfg.cache_dir / "attacks", device=cfg.device, seed=seed, profile=cfg.profile)
+    for reader in [a for a in attackers if isinstance(a, attacks.Reader)]:
+        if reader.skip_reason(ctx):
+            continue
+        reader.fit(ctx)
+        outcomes, speed = read_plates(reader, sharp, scenes, cfg.profile.batch_size, cfg.device)
+        row, records = plate_rows("sharp", reader.name, seed, cfg, outcomes, speed, reader, config, prov)
+        rows.append(row)
+        plates.extend(records)
+    return rows, plates
+
+
+def run(cfg: RunConfig, on_lens: Callable[[LensOutcome, int], None] | None = None) -> tuple[list[dict], list[dict]]:
+    """All rows of a run and the per-plate records of every reader chain.
+
+    `on_lens(outcome, seed)` is called after each lens (for pictures).
+    """
     selected, failures = attacks.load_all(cfg.attacks)
     for f in failures:
         log.warning("attacker plugin %r failed to load and is skipped: %s", f.name, f.error)
     prov = provenance(cfg.device)
     rows: list[dict] = []
+    plates: list[dict] = []
     for seed in cfg.seeds:
         torch.manual_seed(seed)
-        sharp = to_tensor(load_scenes(cfg.scenes, "val", cfg.profile.n_val, cfg.profile.image_size, seed))
+        scenes = load_scenes(cfg.scenes, "val", cfg.profile.n_val, cfg.profile.image_size, seed)
+        sharp = to_tensor(scenes)
+        t0 = time.perf_counter()
+        ref_rows, ref_plates = sharp_reference(seed, cfg, sharp, scenes, selected, prov)
+        for r in ref_rows:
+            r["wall_s"] = time.perf_counter() - t0
+        rows.extend(ref_rows)
+        plates.extend(ref_plates)
         for lens_name in tqdm(cfg.lenses, desc=f"seed {seed}: lenses"):
             t0 = time.perf_counter()
-            outcome = run_lens(lens_name, seed, cfg, sharp, selected, prov)
+            outcome = run_lens(lens_name, seed, cfg, sharp, scenes, selected, prov)
             wall = time.perf_counter() - t0
             for r in outcome.rows:
                 r["wall_s"] = wall
             rows.extend(outcome.rows)
+            plates.extend(outcome.plates)
             if on_lens is not None:
                 on_lens(outcome, seed)
-    return rows
+    return rows, plates

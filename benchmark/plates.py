@@ -1,0 +1,99 @@
+"""Plate-reading scores, computed by the runner for every reader and chain.
+
+Plate accuracy (the paper's LPDR accuracy): correctly detected and fully recognised plates over
+readable plates. A plate is *readable* when it is fully visible (at least 99 % of its pixels in
+the image and unoccluded), not mirrored by augmentation, and at least READABLE_MIN_WIDTH_PX wide.
+A read detects a plate when its box overlaps the plate box with IoU >= MATCH_IOU or its centre
+falls inside it; the plate counts as read when the best-matching read's text equals the
+ground truth exactly (case and spaces ignored). Character error rate: Levenshtein distance
+between the best read (or the empty string) and the truth, over the truth's length.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from attacks import PlateRead
+from benchmark.scenes import Plate, Scene
+
+READABLE_MIN_WIDTH_PX = 16
+READABLE_MIN_VISIBLE = 0.99
+MATCH_IOU = 0.3
+WIDTH_BINS_PX = (16, 24, 32, 48, 64, 96, 128, 192)
+
+
+@dataclass(frozen=True)
+class PlateOutcome:
+    """One readable ground-truth plate and what a reader made of it."""
+
+    scene: str
+    truth: str
+    width_px: int
+    read: str
+    detected: bool
+    correct: bool
+    cer: float
+
+
+def readable(plate: Plate) -> bool:
+    x0, _, x1, _ = plate.box_xyxy
+    return (not plate.mirrored and plate.visible_fraction >= READABLE_MIN_VISIBLE
+            and x1 - x0 >= READABLE_MIN_WIDTH_PX)
+
+
+def normalise(text: str) -> str:
+    return "".join(ch for ch in text.upper() if ch.isalnum())
+
+
+def levenshtein(a: str, b: str) -> int:
+    prev = list(range(len(b) + 1))
+    for i, ca in enumerate(a, 1):
+        cur = [i]
+        for j, cb in enumerate(b, 1):
+            cur.append(min(prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (ca != cb)))
+        prev = cur
+    return prev[-1]
+
+
+def iou(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    ix = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
+    iy = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
+    inter = ix * iy
+    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
+    return inter / union if union > 0 else 0.0
+
+
+def _matches(read: PlateRead, plate: Plate) -> bool:
+    cx, cy = (read.box_xyxy[0] + read.box_xyxy[2]) / 2, (read.box_xyxy[1] + read.box_xyxy[3]) / 2
+    x0, y0, x1, y1 = plate.box_xyxy
+    return iou(read.box_xyxy, plate.box_xyxy) >= MATCH_IOU or (x0 <= cx < x1 and y0 <= cy < y1)
+
+
+def score_scene(reads: list[PlateRead], scene: Scene) -> list[PlateOutcome]:
+    """Outcomes for every readable plate of one scene (each read is used for one plate at most)."""
+    outcomes, used = [], set()
+    for plate in scene.plates:
+        if not readable(plate):
+            continue
+        truth = normalise(plate.text)
+        candidates = [(i, r) for i, r in enumerate(reads) if i not in used and _matches(r, plate)]
+        best = min(candidates, key=lambda ir: (levenshtein(normalise(ir[1].text), truth), -ir[1].score), default=None)
+        text = ""
+        if best is not None:
+            used.add(best[0])
+            text = normalise(best[1].text)
+        outcomes.append(PlateOutcome(scene.name, truth, int(plate.box_xyxy[2] - plate.box_xyxy[0]), text,
+                                     best is not None, text == truth, levenshtein(text, truth) / len(truth)))
+    return outcomes
+
+
+def summarise(outcomes: list[PlateOutcome]) -> dict[str, float | int]:
+    """Row metrics: plate_acc, plate_cer, plate_det (detection rate) and n_plates."""
+    if not outcomes:
+        return {"n_plates": 0}
+    return {"plate_acc": float(np.mean([o.correct for o in outcomes])),
+            "plate_cer": float(np.mean([o.cer for o in outcomes])),
+            "plate_det": float(np.mean([o.detected for o in outcomes])),
+            "n_plates": len(outcomes)}
