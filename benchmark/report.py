@@ -17,7 +17,7 @@ from benchmark.cache import atomic_write_text  # noqa: E402
 
 SCHEMA_VERSION = 1
 ID_COLUMNS = ["lens", "attack", "profile", "scenes"]
-METRIC_COLUMNS = ["threat_model", "psnr_db", "ssim", "miou", "mean_acc", "overall_acc", "plate_acc", "plate_cer",
+METRIC_COLUMNS = ["threat_model", "miou", "mean_acc", "overall_acc", "psnr_db", "ssim", "plate_acc", "plate_cer",
                   "plate_det", "n_plates", "psf_size_px", "psf_energy", "fit_s", "images_per_s"]
 
 

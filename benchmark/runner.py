@@ -24,7 +24,10 @@ from benchmark.metrics import finite_mean, psnr, ssim
 from benchmark.plates import PlateOutcome, score_scene, summarise
 from benchmark.profiles import Profile
 from benchmark.provenance import provenance
-from benchmark.scenes import Scene, load_scenes
+from benchmark.scenes import CLASS_NAMES, Scene, load_scenes
+from benchmark.utility.scoring import confusion_matrix, predict, scores, window_for
+from lenses.codesign.schemes import SCHEMES
+from lenses.codesign.trainer import CoDesign, pretrain_utility
 
 log = logging.getLogger(__name__)
 
@@ -94,6 +97,49 @@ def train_pairs_factory(lens: lenses.Lens, cfg: RunConfig, seed: int) -> Callabl
     return pairs
 
 
+def training_scenes(scene_set: str) -> str:
+    """Scenes that carry labels for training: Cityscapes when given, else the synthetic set."""
+    return scene_set if scene_set.startswith("cityscapes:") else "synthetic"
+
+
+def has_labels(scenes: list[Scene]) -> bool:
+    return any(bool((s.labels != 255).any()) for s in scenes)
+
+
+def segmenter(net: torch.nn.Module, cfg: RunConfig) -> Callable[[torch.Tensor], torch.Tensor]:
+    """images (B,3,H,W) in [0,1] -> train ids (B,H,W), by sliding-window inference."""
+    window, stride = window_for(cfg.profile.image_size, cfg.profile.train_crop)
+    return lambda images: predict(net, images, window, stride, cfg.profile.batch_size, cfg.device).to(images.device)
+
+
+def utility_metrics(net: torch.nn.Module, images: torch.Tensor, scenes: list[Scene], cfg: RunConfig) -> dict:
+    """miou / mean_acc / overall_acc (+ per-class IoU columns) and inference speed on a split."""
+    t0 = time.perf_counter()
+    pred = segmenter(net, cfg)(images)
+    speed = images.shape[0] / (time.perf_counter() - t0)
+    target = torch.from_numpy(np.stack([s.labels for s in scenes]))
+    s = scores(confusion_matrix(pred, target))
+    metrics = {k: s[k] for k in ("miou", "mean_acc", "overall_acc")}
+    metrics.update({f"iou_{name}": v for name, v in zip(CLASS_NAMES, s["class_iou"])})
+    metrics["images_per_s"] = speed
+    return metrics
+
+
+def utility_net_for(lens: lenses.Lens, lens_name: str, seed: int, cfg: RunConfig) -> tuple[torch.nn.Module, float]:
+    """The lens's own utility network and the seconds spent training it now (0 when cached).
+
+    Co-designed lenses bring theirs; a fixed lens gets the clean net fine-tuned to its sensor
+    images (scheme `fixed`), cached like any training run.
+    """
+    if lens.utility_net is not None:
+        return lens.utility_net, 0.0
+    run = CoDesign(lens.spec, SCHEMES["fixed"], cfg.profile, seed, cfg.device, cfg.cache_dir,
+                   name=f"fixed-{lens_name.replace('/', '_')}", scene_set=training_scenes(cfg.scenes))
+    t0 = time.perf_counter()
+    trained = run.load_or_train()
+    return trained.utility_net, time.perf_counter() - t0
+
+
 def _row(lens_name: str, attack: str, seed: int, cfg: RunConfig, metrics: dict, config: dict, prov: dict) -> dict:
     row = {"lens": lens_name, "attack": attack, "seed": seed, "profile": cfg.profile.name, "scenes": cfg.scenes}
     row.update(metrics)
@@ -136,10 +182,13 @@ def plate_rows(lens_name: str, attack: str, seed: int, cfg: RunConfig, outcomes:
 
 
 def run_lens(lens_name: str, seed: int, cfg: RunConfig, sharp: torch.Tensor, scenes: list[Scene],
-             attackers: list[attacks.Attack], prov: dict) -> LensOutcome:
+             attackers: list[attacks.Attack], prov: dict, clean_net: torch.nn.Module | None) -> LensOutcome:
     """Everything for one lens and one seed."""
     p = cfg.profile
-    lens = lenses.load(lens_name, profile=p, seed=seed, device=cfg.device, cache_dir=cfg.cache_dir).to(cfg.device)
+    t0 = time.perf_counter()
+    lens = lenses.load(lens_name, profile=p, seed=seed, device=cfg.device, cache_dir=cfg.cache_dir,
+                       scenes=training_scenes(cfg.scenes)).to(cfg.device)
+    lens_fit_s = time.perf_counter() - t0
     base_config = {"lens": lens.current_spec().to_dict(), "profile": p.to_dict(), "scenes": cfg.scenes, "seed": seed}
     t0 = time.perf_counter()
     sensor = sense(lens, sharp, p.batch_size, seed, cfg.device)
@@ -148,8 +197,14 @@ def run_lens(lens_name: str, seed: int, cfg: RunConfig, sharp: torch.Tensor, sce
                  {"images_per_s": sharp.shape[0] / lens_s, "psf_size_px": lens.geometry.psf_size_px,
                   "psf_energy": float(lens.psf_and_energy()[1].min())},
                  {**base_config, "attack": "lens"}, prov)]
+    lens_net = None
+    if clean_net is not None:
+        lens_net, utility_fit_s = utility_net_for(lens, lens_name, seed, cfg)
+        metrics = {**utility_metrics(lens_net, sensor, scenes, cfg), "fit_s": lens_fit_s + utility_fit_s}
+        rows.append(_row(lens_name, "utility", seed, cfg, metrics, {**base_config, "attack": "utility"}, prov))
     ctx = attacks.FitContext(lens=lens, train_pairs=train_pairs_factory(lens, cfg, seed),
-                             cache_dir=cfg.cache_dir / "attacks", device=cfg.device, seed=seed, profile=p)
+                             cache_dir=cfg.cache_dir / "attacks", device=cfg.device, seed=seed, profile=p,
+                             extras={"segmenter": segmenter(lens_net, cfg) if lens_net is not None else None})
     restored: dict[str, torch.Tensor] = {}
     for attacker in tqdm([a for a in attackers if isinstance(a, attacks.Restorer)], desc=f"{lens_name} restorers",
                          leave=False):
@@ -179,7 +234,11 @@ def run_lens(lens_name: str, seed: int, cfg: RunConfig, sharp: torch.Tensor, sce
         reader.fit(ctx)
         sources = {reader.name: sensor, **{f"{name}>{reader.name}": out for name, out in restored.items()}}
         for chain, images in tqdm(sources.items(), desc=f"{lens_name} {reader.name}", leave=False):
-            outcomes, speed = read_plates(reader, images, scenes, p.batch_size, cfg.device)
+            # The attacker with device access segments sensor images with the lens's own network,
+            # restored images with the clean one.
+            net = lens_net if chain == reader.name else clean_net
+            segment = segmenter(net, cfg) if net is not None else None
+            outcomes, speed = read_plates(reader, images, scenes, p.batch_size, cfg.device, segment)
             row, records = plate_rows(lens_name, chain, seed, cfg, outcomes, speed, reader, base_config, prov)
             rows.append(row)
             plates.extend(records)
@@ -189,16 +248,23 @@ def run_lens(lens_name: str, seed: int, cfg: RunConfig, sharp: torch.Tensor, sce
 
 
 def sharp_reference(seed: int, cfg: RunConfig, sharp: torch.Tensor, scenes: list[Scene],
-                    attackers: list[attacks.Attack], prov: dict) -> tuple[list[dict], list[dict]]:
-    """Reader rows on the sharp scenes themselves (lens `sharp`, the paper's "Original")."""
+                    attackers: list[attacks.Attack], prov: dict, clean_net: torch.nn.Module | None
+                    ) -> tuple[list[dict], list[dict]]:
+    """Rows measured on the sharp scenes themselves (lens `sharp`, the paper's "Original"):
+    the clean utility net's scores and every reader."""
     rows, plates = [], []
     config = {"lens": "sharp", "profile": cfg.profile.to_dict(), "scenes": cfg.scenes, "seed": seed}
-    ctx = attacks.FitContext(cache_dir=cfg.cache_dir / "attacks", device=cfg.device, seed=seed, profile=cfg.profile)
+    segment = segmenter(clean_net, cfg) if clean_net is not None else None
+    if clean_net is not None:
+        rows.append(_row("sharp", "utility", seed, cfg, utility_metrics(clean_net, sharp, scenes, cfg),
+                         {**config, "attack": "utility"}, prov))
+    ctx = attacks.FitContext(cache_dir=cfg.cache_dir / "attacks", device=cfg.device, seed=seed, profile=cfg.profile,
+                             extras={"segmenter": segment})
     for reader in [a for a in attackers if isinstance(a, attacks.Reader)]:
         if reader.skip_reason(ctx):
             continue
         reader.fit(ctx)
-        outcomes, speed = read_plates(reader, sharp, scenes, cfg.profile.batch_size, cfg.device)
+        outcomes, speed = read_plates(reader, sharp, scenes, cfg.profile.batch_size, cfg.device, segment)
         row, records = plate_rows("sharp", reader.name, seed, cfg, outcomes, speed, reader, config, prov)
         rows.append(row)
         plates.extend(records)
@@ -221,14 +287,17 @@ def run(cfg: RunConfig, on_lens: Callable[[LensOutcome, int], None] | None = Non
         scenes = load_scenes(cfg.scenes, "val", cfg.profile.n_val, cfg.profile.image_size, seed)
         sharp = to_tensor(scenes)
         t0 = time.perf_counter()
-        ref_rows, ref_plates = sharp_reference(seed, cfg, sharp, scenes, selected, prov)
+        clean_net = None
+        if has_labels(scenes):
+            clean_net = pretrain_utility(cfg.profile, seed, cfg.device, cfg.cache_dir, training_scenes(cfg.scenes))
+        ref_rows, ref_plates = sharp_reference(seed, cfg, sharp, scenes, selected, prov, clean_net)
         for r in ref_rows:
             r["wall_s"] = time.perf_counter() - t0
         rows.extend(ref_rows)
         plates.extend(ref_plates)
         for lens_name in tqdm(cfg.lenses, desc=f"seed {seed}: lenses"):
             t0 = time.perf_counter()
-            outcome = run_lens(lens_name, seed, cfg, sharp, scenes, selected, prov)
+            outcome = run_lens(lens_name, seed, cfg, sharp, scenes, selected, prov, clean_net)
             wall = time.perf_counter() - t0
             for r in outcome.rows:
                 r["wall_s"] = wall

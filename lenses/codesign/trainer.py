@@ -1,0 +1,297 @@
+"""The co-design training loop (paper Fig. 2), with caching, resume and a NaN guard.
+
+Per step: scene crops -> lens -> sensor image; one step of the segmentation net (cross-entropy,
+AdamW) and of the RED10 adversary (MSE, Adam) on the detached sensor image; then a second pass
+through the updated networks steps the optics (Adam, or MTAdam) on
+lambda_seg L_seg - lambda_deb L_deb (+ the gradient penalty), and projects the coefficients back
+inside the bounds of the spec. A clean pre-training of the utility net on sharp scenes is shared
+by all lenses and fine-tuned per lens, as the paper fine-tunes SegFormer.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import torch
+import torch.nn.functional as F
+from tqdm.auto import tqdm
+
+from attacks.networks.red10 import RED10
+from benchmark.cache import config_hash
+from benchmark.utility.segformer import build_segformer, segment_logits
+from lenses.codesign.artifacts import (load_checkpoint, load_weights, publish_directory, save_checkpoint,
+                                       save_weights, write_json)
+from lenses.codesign.data import CropSampler, step_generator
+from lenses.codesign.mtadam import MTAdam
+from lenses.codesign.schemes import Scheme
+from lenses.lens import Lens
+from lenses.spec import LensSpec, load_spec, spec_to_toml
+
+log = logging.getLogger(__name__)
+
+IGNORE = 255
+# Bumped whenever the loop changes what it computes, so stale cache entries are not reused.
+TRAINER_VERSION = 1
+
+
+class TrainingDivergedError(RuntimeError):
+    """A loss became NaN or Inf; the last good checkpoint is kept."""
+
+
+@dataclass
+class TrainedLens:
+    """A lens together with the networks trained with it."""
+
+    lens: Lens
+    utility_net: torch.nn.Module
+    adversary: torch.nn.Module | None
+    record: dict[str, Any]
+    directory: Path
+
+
+def psf_radius_px(psf: torch.Tensor) -> float:
+    """Energy-weighted RMS radius of a (3,K,K) PSF about its centroid, in pixels (channel mean)."""
+    k = psf.shape[-1]
+    yy, xx = torch.meshgrid(torch.arange(k, dtype=psf.dtype), torch.arange(k, dtype=psf.dtype), indexing="ij")
+    radii = []
+    for p in psf.detach().cpu():
+        cy, cx = float((p * yy).sum()), float((p * xx).sum())
+        radii.append(float(torch.sqrt((p * ((yy - cy) ** 2 + (xx - cx) ** 2)).sum())))
+    return sum(radii) / len(radii)
+
+
+def _profile_fields(profile: Any, names: tuple[str, ...]) -> dict[str, Any]:
+    return {n: getattr(profile, n) for n in names}
+
+
+_DATA_FIELDS = ("image_size", "n_train", "train_crop", "batch_size")
+
+
+def pretrain_utility(profile: Any, seed: int, device: str, cache_dir: Path, scene_set: str = "synthetic",
+                     progress: bool = True) -> torch.nn.Module:
+    """The clean utility net: SegFormer trained on sharp scenes, cached once per (profile, seed)."""
+    config = {"what": "clean-utility", "version": TRAINER_VERSION, "model": profile.utility_model,
+              "steps": profile.pretrain_steps, "lr": profile.seg_lr, "scenes": scene_set, "seed": seed,
+              **_profile_fields(profile, _DATA_FIELDS)}
+    path = Path(cache_dir) / "utility" / f"clean-{profile.utility_model}-{config_hash(config)}.safetensors"
+    torch.manual_seed(seed)
+    net = build_segformer(profile.utility_model).to(device)
+    if path.is_file():
+        return load_weights(path, net).eval()
+    sampler = CropSampler.from_split(scene_set, profile.n_train, profile.image_size, profile.train_crop,
+                                     profile.batch_size, seed)
+    opt = torch.optim.AdamW(net.parameters(), lr=profile.seg_lr)
+    net.train()
+    bar = tqdm(range(profile.pretrain_steps), desc="clean utility pre-training", disable=not progress, leave=False)
+    for step in bar:
+        torch.manual_seed(seed * 7919 + step)
+        x, y = sampler.batch(step, device)
+        loss = F.cross_entropy(segment_logits(net, x), y, ignore_index=IGNORE)
+        if not torch.isfinite(loss):
+            raise TrainingDivergedError(f"clean utility pre-training diverged at step {step} (loss {float(loss)})")
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        bar.set_postfix(ce=f"{loss.item():.3f}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(f".tmp{torch.randint(1 << 30, (1,)).item()}")
+    save_weights(tmp, net)
+    tmp.replace(path)
+    return net.eval()
+
+
+class CoDesign:
+    """One training run: a start spec, a scheme, a profile and a seed; cached by their hash."""
+
+    def __init__(self, start: LensSpec, scheme: Scheme, profile: Any, seed: int, device: str, cache_dir: Path,
+                 name: str | None = None, scene_set: str = "synthetic"):
+        if scheme.optics and not start.mask.trainable:
+            raise ValueError(f"scheme {scheme.name!r} trains the optics, but lens spec {start.name!r} declares no "
+                             "mask.bounds_um (a trainable mask declares its bounds)")
+        self.start, self.scheme, self.profile, self.seed = start, scheme, profile, seed
+        self.device, self.scene_set = device, scene_set
+        self.name = name or scheme.name
+        self.config = {
+            "what": "codesign", "version": TRAINER_VERSION, "scheme": dataclasses.asdict(scheme),
+            "start": start.to_dict(), "seed": seed, "scenes": scene_set,
+            **_profile_fields(profile, _DATA_FIELDS + ("utility_model", "adversary_width", "pretrain_steps",
+                                                       "codesign_steps", "optics_lr", "seg_lr", "deb_lr")),
+        }
+        root = Path(cache_dir) / "codesign"
+        self.directory = root / f"{self.name}-{config_hash(self.config)}"
+        self.checkpoint_path = root / f"{self.directory.name}.checkpoint.pt"
+        self.cache_dir = Path(cache_dir)
+
+    # ---- loading -------------------------------------------------------------------------------
+    def load(self) -> TrainedLens | None:
+        """The finished run from the cache, or None."""
+        d = self.directory
+        if not (d / "record.json").is_file():
+            return None
+        import json
+        record = json.loads((d / "record.json").read_text())
+        lens = Lens(load_spec(d / "lens.toml"), geometry=None).to(self.device)
+        utility = load_weights(d / "utility.safetensors", build_segformer(self.profile.utility_model)).to(self.device)
+        adversary = None
+        if (d / "adversary.safetensors").is_file():
+            adversary = load_weights(d / "adversary.safetensors", RED10(self.profile.adversary_width)).to(self.device)
+            adversary.eval()
+        utility.eval()
+        return TrainedLens(lens, utility, adversary, record, d)
+
+    def load_or_train(self, progress: bool = True) -> TrainedLens:
+        return self.load() or self.train(progress=progress)
+
+    # ---- training ------------------------------------------------------------------------------
+    def train(self, progress: bool = True, stop_after: int | None = None,
+              on_step: Callable[[int, dict], None] | None = None) -> TrainedLens:
+        """Train (resuming from the last checkpoint if one exists) and publish the artifacts.
+
+        `stop_after` ends the call after that many steps of this call, leaving the checkpoint
+        (used by tests to simulate an interruption).
+        """
+        p, scheme, dev = self.profile, self.scheme, self.device
+        t_start = time.perf_counter()
+        clean = pretrain_utility(p, self.seed, dev, self.cache_dir, self.scene_set, progress)
+        torch.manual_seed(self.seed)
+        lens = Lens(self.start).to(dev)
+        seg = build_segformer(p.utility_model).to(dev)
+        seg.load_state_dict(clean.state_dict())
+        deb = RED10(p.adversary_width).to(dev) if scheme.adversary else None
+        opt_seg = torch.optim.AdamW(seg.parameters(), lr=p.seg_lr)
+        opt_deb = torch.optim.Adam(deb.parameters(), lr=p.deb_lr) if deb is not None else None
+        opt_opt: torch.optim.Optimizer | None = None
+        if scheme.optics:
+            params = [lens.coefficients_um]
+            opt_opt = MTAdam(params, lr=p.optics_lr) if scheme.balance == "mtadam" else torch.optim.Adam(params, lr=p.optics_lr)
+        curves: dict[str, list] = {"step": [], "seg": [], "deb": [], "gp": [], "coefficients_um": [], "psf_radius_px": []}
+        start_step = 0
+        ckpt = load_checkpoint(self.checkpoint_path)
+        if ckpt is not None:
+            start_step = int(ckpt["step"])
+            with torch.no_grad():
+                lens.coefficients_um.copy_(ckpt["coefficients_um"])
+            seg.load_state_dict(ckpt["seg"])
+            opt_seg.load_state_dict(ckpt["opt_seg"])
+            if deb is not None:
+                deb.load_state_dict(ckpt["deb"])
+                opt_deb.load_state_dict(ckpt["opt_deb"])  # type: ignore[union-attr]
+            if opt_opt is not None:
+                opt_opt.load_state_dict(ckpt["opt_optics"])
+            curves = ckpt["curves"]
+            log.info("%s: resuming from step %d (%s)", self.name, start_step, self.checkpoint_path)
+        sampler = CropSampler.from_split(self.scene_set, p.n_train, p.image_size, p.train_crop, p.batch_size,
+                                         self.seed)
+        every = max(1, p.codesign_steps // 10)
+        seg.train()
+        if deb is not None:
+            deb.train()
+        bar = tqdm(range(start_step, p.codesign_steps), desc=f"co-design {self.name}", disable=not progress,
+                   initial=start_step, total=p.codesign_steps, leave=False)
+        done_here = 0
+        for step in bar:
+            stats = self._step(step, lens, seg, deb, opt_seg, opt_deb, opt_opt, sampler)
+            curves["step"].append(step)
+            for key in ("seg", "deb", "gp"):
+                curves[key].append(stats.get(key, math.nan))
+            curves["coefficients_um"].append([float(c) for c in lens.coefficients_um.detach().cpu()])
+            curves["psf_radius_px"].append(stats["psf_radius_px"])
+            bar.set_postfix({k: f"{v:.3g}" for k, v in stats.items() if k != "psf_radius_px"})
+            if on_step is not None:
+                on_step(step, stats)
+            done_here += 1
+            last = step + 1 == p.codesign_steps
+            if (step + 1) % every == 0 or last:
+                state = {"step": step + 1, "coefficients_um": lens.coefficients_um.detach().cpu(),
+                         "seg": seg.state_dict(), "opt_seg": opt_seg.state_dict(), "curves": curves}
+                if deb is not None:
+                    state.update(deb=deb.state_dict(), opt_deb=opt_deb.state_dict())  # type: ignore[union-attr]
+                if opt_opt is not None:
+                    state["opt_optics"] = opt_opt.state_dict()
+                save_checkpoint(self.checkpoint_path, state)
+            if stop_after is not None and done_here >= stop_after and not last:
+                raise KeyboardInterrupt(f"stopped after {done_here} steps (checkpoint kept)")
+        record = {"name": self.name, "scheme": self.scheme.name, "config": self.config, "curves": curves,
+                  "train_s": time.perf_counter() - t_start, "seconds_per_step": None,
+                  "final_coefficients_um": [float(c) for c in lens.coefficients_um.detach().cpu()],
+                  "psf_radius_px": psf_radius_px(lens.psf())}
+        if done_here:
+            record["seconds_per_step"] = (time.perf_counter() - t_start) / done_here
+        self._publish(lens, seg, deb, record)
+        self.checkpoint_path.unlink(missing_ok=True)
+        trained = self.load()
+        assert trained is not None
+        return trained
+
+    def _step(self, step: int, lens: Lens, seg: torch.nn.Module, deb: torch.nn.Module | None,
+              opt_seg: torch.optim.Optimizer, opt_deb: torch.optim.Optimizer | None,
+              opt_opt: torch.optim.Optimizer | None, sampler: CropSampler) -> dict[str, float]:
+        scheme, dev = self.scheme, self.device
+        torch.manual_seed(self.seed * 7919 + step)  # drop-path etc.: reproducible across resumes
+        x, y = sampler.batch(step, dev)
+        sensor = lens(x, generator=step_generator(self.seed, step, dev))
+        # 1) the networks, on the detached sensor image
+        loss_seg = F.cross_entropy(segment_logits(seg, sensor.detach()), y, ignore_index=IGNORE)
+        stats = {"seg": loss_seg.item()}
+        opt_seg.zero_grad(set_to_none=True)
+        loss_seg.backward()
+        opt_seg.step()
+        if deb is not None:
+            loss_deb = F.mse_loss(deb(sensor.detach()), x)
+            stats["deb"] = loss_deb.item()
+            opt_deb.zero_grad(set_to_none=True)  # type: ignore[union-attr]
+            loss_deb.backward()
+            opt_deb.step()  # type: ignore[union-attr]
+        self._guard(step, stats)
+        # 2) the optics, through the updated networks
+        if opt_opt is not None:
+            coeffs = lens.coefficients_um
+            seg_term = scheme.lambda_seg * F.cross_entropy(segment_logits(seg, sensor), y, ignore_index=IGNORE)
+            if deb is None:
+                total = seg_term
+            else:
+                deb_term = F.mse_loss(deb(sensor), x)
+                total = seg_term - scheme.lambda_deb * deb_term
+                if scheme.balance == "gp":
+                    (g,) = torch.autograd.grad(deb_term, coeffs, create_graph=True)
+                    penalty = (g.norm() - 1.0) ** 2
+                    stats["gp"] = penalty.item()
+                    total = total + penalty
+            self._guard(step, {"optics": total.item()})
+            if scheme.balance == "mtadam":
+                # MTAdam balances the terms itself: L_seg is the anchor, -lambda_deb L_deb is rescaled to it.
+                opt_opt.step([seg_term, -scheme.lambda_deb * deb_term])  # type: ignore[call-arg]
+            else:
+                (grad,) = torch.autograd.grad(total, coeffs)
+                opt_opt.zero_grad(set_to_none=True)
+                coeffs.grad = grad
+                opt_opt.step()
+            lens.clamp_to_bounds()
+        stats["psf_radius_px"] = psf_radius_px(lens.psf())
+        return stats
+
+    def _guard(self, step: int, stats: dict[str, float]) -> None:
+        bad = {k: v for k, v in stats.items() if not math.isfinite(v)}
+        if bad:
+            raise TrainingDivergedError(
+                f"co-design {self.name!r} diverged at step {step}: {bad}; the last good checkpoint is kept at "
+                f"{self.checkpoint_path if self.checkpoint_path.exists() else '(none yet)'}; lower the profile's "
+                "optics_lr or seg_lr and rerun (it resumes from the checkpoint)")
+
+    def _publish(self, lens: Lens, seg: torch.nn.Module, deb: torch.nn.Module | None, record: dict) -> None:
+        staging = self.directory.with_name(self.directory.name + f".staging-{torch.randint(1 << 30, (1,)).item()}")
+        staging.mkdir(parents=True)
+        learned = dataclasses.replace(lens.current_spec(), name=self.name,
+                                      description=f"co-designed with scheme {self.scheme.name!r}, seed {self.seed}")
+        (staging / "lens.toml").write_text(spec_to_toml(learned))
+        save_weights(staging / "utility.safetensors", seg)
+        if deb is not None:
+            save_weights(staging / "adversary.safetensors", deb)
+        write_json(staging / "record.json", record)
+        publish_directory(staging, self.directory)

@@ -1,0 +1,92 @@
+"""Co-design training on a tiny profile: schemes move the optics, resume, NaN guard, cache, export."""
+
+import dataclasses
+
+import pytest
+import torch
+
+import lenses
+from benchmark.profiles import PROFILES
+from lenses.codesign.builtin import START_SPEC
+from lenses.codesign.data import CropSampler
+from lenses.codesign.schemes import SCHEMES
+from lenses.codesign.trainer import CoDesign, TrainingDivergedError
+from lenses.spec import load_spec
+
+TINY = dataclasses.replace(PROFILES["smoke"], image_size=(64, 128), n_train=2, train_crop=(48, 48), batch_size=2,
+                           codesign_steps=2, pretrain_steps=1, utility_model="tiny", adversary_width=4)
+
+
+def run(scheme, tmp_path, profile=TINY, seed=0):
+    return CoDesign(load_spec(START_SPEC), SCHEMES[scheme], profile, seed, "cpu", tmp_path)
+
+
+@pytest.mark.parametrize("scheme", ["os", "os-d-1", "os-d-100", "os-d-1000", "os-d-mtadam", "gp"])
+def test_one_step_of_each_scheme_moves_the_optics(scheme, tmp_path):
+    profile = dataclasses.replace(TINY, codesign_steps=1)
+    seen = {}
+    trained = run(scheme, tmp_path, profile).train(progress=False, on_step=lambda step, stats: seen.update(stats))
+    start = torch.tensor(load_spec(START_SPEC).mask.zernike_um)
+    moved = torch.tensor(trained.record["final_coefficients_um"])
+    assert float((moved - start).abs().max()) > 1e-4
+    assert trained.lens.spec.mask.bounds_um == load_spec(START_SPEC).mask.bounds_um
+    if scheme == "gp":
+        assert torch.isfinite(torch.tensor(seen["gp"]))
+    assert (trained.adversary is None) == (scheme == "os")
+
+
+def test_gradient_penalty_reaches_the_optics():
+    lens = lenses.Lens(load_spec(START_SPEC))
+    from attacks.networks.red10 import RED10
+    deb = RED10(4)
+    x = torch.rand(2, 3, 32, 32)
+    loss = torch.nn.functional.mse_loss(deb(lens(x, generator=torch.Generator().manual_seed(0))), x)
+    (g,) = torch.autograd.grad(loss, lens.coefficients_um, create_graph=True)
+    (g2,) = torch.autograd.grad((g.norm() - 1) ** 2, lens.coefficients_um)
+    assert torch.isfinite(g2).all() and float(g2[1:].abs().sum()) > 0
+
+
+def test_resume_after_interrupt_matches_uninterrupted(tmp_path):
+    profile = dataclasses.replace(TINY, codesign_steps=3)
+    whole = run("gp", tmp_path / "a", profile).train(progress=False)
+    interrupted = run("gp", tmp_path / "b", profile)
+    with pytest.raises(KeyboardInterrupt):
+        interrupted.train(progress=False, stop_after=1)
+    assert interrupted.checkpoint_path.is_file()
+    assert not interrupted.directory.exists(), "no partial artifact after an interrupt"
+    assert torch.load(interrupted.checkpoint_path, weights_only=True)["step"] == 1
+    resumed = run("gp", tmp_path / "b", profile).train(progress=False)
+    assert resumed.record["final_coefficients_um"] == whole.record["final_coefficients_um"]
+    assert resumed.record["curves"]["step"] == [0, 1, 2]
+
+
+def test_nan_loss_stops_with_a_clear_message_and_keeps_the_checkpoint(tmp_path, monkeypatch):
+    original = CropSampler.batch
+
+    def poisoned(self, step, device="cpu"):
+        x, y = original(self, step, device)
+        return (x * float("nan"), y) if step == 1 else (x, y)
+
+    monkeypatch.setattr(CropSampler, "batch", poisoned)
+    r = run("os-d-1", tmp_path)
+    with pytest.raises(TrainingDivergedError, match=r"diverged at step 1.*checkpoint"):
+        r.train(progress=False)
+    assert torch.load(r.checkpoint_path, weights_only=True)["step"] == 1
+    assert not r.directory.exists()
+
+
+def test_second_load_is_a_cache_hit_and_the_learned_lens_is_a_spec(tmp_path, monkeypatch):
+    first = run("os-d-100", tmp_path).load_or_train(progress=False)
+    monkeypatch.setattr(CoDesign, "train", lambda *a, **k: pytest.fail("trained again despite the cache"))
+    again = run("os-d-100", tmp_path).load_or_train(progress=False)
+    assert again.record["final_coefficients_um"] == first.record["final_coefficients_um"]
+    exported = lenses.load(str(first.directory / "lens.toml"))
+    assert list(exported.spec.mask.zernike_um) == pytest.approx(first.record["final_coefficients_um"], abs=1e-7)
+    torch.testing.assert_close(exported.psf(), first.lens.psf())
+
+
+def test_fixed_scheme_needs_no_bounds_and_optics_schemes_do(tmp_path):
+    fixed = CoDesign(lenses.load("defocus").spec, SCHEMES["fixed"], TINY, 0, "cpu", tmp_path)
+    assert fixed.load_or_train(progress=False).adversary is None
+    with pytest.raises(ValueError, match="declares no mask.bounds_um"):
+        CoDesign(lenses.load("defocus").spec, SCHEMES["gp"], TINY, 0, "cpu", tmp_path)
