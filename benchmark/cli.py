@@ -51,6 +51,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--seeds", type=_seeds, default=[0], help="comma-separated seeds, e.g. 0,1,2 (default 0)")
     run.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
     run.add_argument("--out", type=Path, default=None, help="output folder (default runs/<date-time>)")
+    run.add_argument("--plate-format", default=None, metavar="FORMAT",
+                     help="plate strings the privacy bound counts: L = letter, D = digit (default: the scene generator's)")
+    run.add_argument("--frames", type=int, default=30, metavar="T",
+                     help="frames of a static plate for the video bound (default 30; T = 1 is always reported)")
     sub.add_parser("list", help="list registered lenses, attackers and scene sets")
     return parser
 
@@ -86,8 +90,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = args.out or Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     print(f"profile {profile.name}: {json.dumps(profile.to_dict())}")
+    from benchmark.scenes import PLATE_FORMAT, plate_entropy_bits
+    plate_format = args.plate_format or PLATE_FORMAT
+    plate_entropy_bits(plate_format)  # validates the format before any work
+    if args.frames < 1:
+        raise ValueError(f"--frames must be >= 1, got {args.frames}")
     cfg = runner.RunConfig(lenses=args.lens, attacks=args.attack, scenes=args.scenes, profile=profile,
-                           seeds=args.seeds, device=args.device)
+                           seeds=args.seeds, device=args.device, plate_format=plate_format, frames=args.frames)
 
     def pictures(outcome: runner.LensOutcome, seed: int) -> None:
         scores = {r["attack"]: f"PSNR {r['psnr_db']:.2f} dB, SSIM {r['ssim']:.3f}"

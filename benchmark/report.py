@@ -18,7 +18,8 @@ from benchmark.cache import atomic_write_text  # noqa: E402
 SCHEMA_VERSION = 1
 ID_COLUMNS = ["lens", "attack", "profile", "scenes"]
 METRIC_COLUMNS = ["threat_model", "miou", "mean_acc", "overall_acc", "psnr_db", "ssim", "plate_acc", "plate_cer",
-                  "plate_det", "n_plates", "psf_size_px", "psf_energy", "fit_s", "images_per_s"]
+                  "plate_det", "n_plates", "bound_bits_w32_t1", "bound_ceiling_w32_t1", "bound_width_eps_t1",
+                  "psf_size_px", "psf_energy", "fit_s", "images_per_s"]
 
 
 def write_results(out: Path, rows: list[dict], meta: dict) -> Path:

@@ -24,7 +24,9 @@ from benchmark.metrics import finite_mean, psnr, ssim
 from benchmark.plates import PlateOutcome, score_scene, summarise
 from benchmark.profiles import Profile
 from benchmark.provenance import provenance
-from benchmark.scenes import CLASS_NAMES, Scene, load_scenes
+from benchmark.plate_spectrum import cached_plate_spectrum
+from benchmark.scenes import CLASS_NAMES, PLATE_FORMAT, Scene, load_scenes, plate_entropy_bits
+from lenses.bound import PlateSpectrum, bound_row
 from benchmark.utility.scoring import confusion_matrix, predict, scores, window_for
 from lenses.codesign.schemes import SCHEMES
 from lenses.codesign.trainer import CoDesign, pretrain_utility
@@ -41,6 +43,8 @@ class RunConfig:
     seeds: list[int]
     device: str = "cpu"
     cache_dir: Path = field(default_factory=cache_root)
+    plate_format: str = PLATE_FORMAT   # the plate strings the bound's entropy counts
+    frames: int = 30                   # T of the video bound (T = 1 is always reported)
 
 
 @dataclass
@@ -181,8 +185,17 @@ def plate_rows(lens_name: str, attack: str, seed: int, cfg: RunConfig, outcomes:
     return row, records
 
 
+def bound_metrics(lens: lenses.Lens, spectrum: PlateSpectrum, cfg: RunConfig) -> dict:
+    t0 = time.perf_counter()
+    metrics = bound_row(lens, spectrum, plate_entropy_bits(cfg.plate_format), frames=tuple(sorted({1, cfg.frames})))
+    metrics["bound_plate_format"] = cfg.plate_format
+    metrics["fit_s"] = time.perf_counter() - t0
+    return metrics
+
+
 def run_lens(lens_name: str, seed: int, cfg: RunConfig, sharp: torch.Tensor, scenes: list[Scene],
-             attackers: list[attacks.Attack], prov: dict, clean_net: torch.nn.Module | None) -> LensOutcome:
+             attackers: list[attacks.Attack], prov: dict, clean_net: torch.nn.Module | None,
+             spectrum: PlateSpectrum | None = None) -> LensOutcome:
     """Everything for one lens and one seed."""
     p = cfg.profile
     t0 = time.perf_counter()
@@ -197,6 +210,10 @@ def run_lens(lens_name: str, seed: int, cfg: RunConfig, sharp: torch.Tensor, sce
                  {"images_per_s": sharp.shape[0] / lens_s, "psf_size_px": lens.geometry.psf_size_px,
                   "psf_energy": float(lens.psf_and_energy()[1].min())},
                  {**base_config, "attack": "lens"}, prov)]
+    if spectrum is not None:
+        rows.append(_row(lens_name, "bound", seed, cfg, bound_metrics(lens, spectrum, cfg),
+                         {**base_config, "attack": "bound", "plate_format": cfg.plate_format,
+                          "frames": cfg.frames}, prov))
     lens_net = None
     if clean_net is not None:
         lens_net, utility_fit_s = utility_net_for(lens, lens_name, seed, cfg)
@@ -290,6 +307,7 @@ def run(cfg: RunConfig, on_lens: Callable[[LensOutcome, int], None] | None = Non
         clean_net = None
         if has_labels(scenes):
             clean_net = pretrain_utility(cfg.profile, seed, cfg.device, cfg.cache_dir, training_scenes(cfg.scenes))
+        spectrum = cached_plate_spectrum(cfg.cache_dir, cfg.profile.bound_scenes, seed=seed)
         ref_rows, ref_plates = sharp_reference(seed, cfg, sharp, scenes, selected, prov, clean_net)
         for r in ref_rows:
             r["wall_s"] = time.perf_counter() - t0
@@ -297,7 +315,7 @@ def run(cfg: RunConfig, on_lens: Callable[[LensOutcome, int], None] | None = Non
         plates.extend(ref_plates)
         for lens_name in tqdm(cfg.lenses, desc=f"seed {seed}: lenses"):
             t0 = time.perf_counter()
-            outcome = run_lens(lens_name, seed, cfg, sharp, scenes, selected, prov, clean_net)
+            outcome = run_lens(lens_name, seed, cfg, sharp, scenes, selected, prov, clean_net, spectrum)
             wall = time.perf_counter() - t0
             for r in outcome.rows:
                 r["wall_s"] = wall
