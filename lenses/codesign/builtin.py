@@ -59,3 +59,7 @@ def os_d_mtadam(**kw: Any) -> Lens:
 
 def gp(**kw: Any) -> Lens:
     return codesigned("gp", **kw)
+
+
+def os_info(**kw: Any) -> Lens:
+    return codesigned("os-info", **kw)

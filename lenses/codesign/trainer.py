@@ -30,6 +30,7 @@ from lenses.codesign.artifacts import (load_checkpoint, load_weights, publish_di
 from lenses.codesign.data import CropSampler, step_generator
 from lenses.codesign.mtadam import MTAdam
 from lenses.codesign.schemes import Scheme
+from lenses.bound import fano_ceiling, noise_to_signal, plate_bits
 from lenses.lens import Lens
 from lenses.spec import LensSpec, load_spec, spec_to_toml
 
@@ -122,6 +123,7 @@ class CoDesign:
             "start": start.to_dict(), "seed": seed, "scenes": scene_set,
             **_profile_fields(profile, _DATA_FIELDS + ("utility_model", "adversary_width", "pretrain_steps",
                                                        "codesign_steps", "optics_lr", "seg_lr", "deb_lr")),
+            **({"bound_scenes": profile.bound_scenes} if scheme.balance == "info" else {}),
         }
         root = Path(cache_dir) / "codesign"
         self.directory = root / f"{self.name}-{config_hash(self.config)}"
@@ -170,7 +172,8 @@ class CoDesign:
         if scheme.optics:
             params = [lens.coefficients_um]
             opt_opt = MTAdam(params, lr=p.optics_lr) if scheme.balance == "mtadam" else torch.optim.Adam(params, lr=p.optics_lr)
-        curves: dict[str, list] = {"step": [], "seg": [], "deb": [], "gp": [], "coefficients_um": [], "psf_radius_px": []}
+        curves: dict[str, list] = {"step": [], "seg": [], "deb": [], "gp": [], "bits": [], "coefficients_um": [],
+                                   "psf_radius_px": []}
         start_step = 0
         ckpt = load_checkpoint(self.checkpoint_path)
         if ckpt is not None:
@@ -188,6 +191,11 @@ class CoDesign:
             log.info("%s: resuming from step %d (%s)", self.name, start_step, self.checkpoint_path)
         sampler = CropSampler.from_split(self.scene_set, p.n_train, p.image_size, p.train_crop, p.batch_size,
                                          self.seed)
+        if scheme.balance == "info":
+            from benchmark.plate_spectrum import cached_plate_spectrum
+            from benchmark.scenes import plate_entropy_bits
+            self.spectrum = cached_plate_spectrum(self.cache_dir, p.bound_scenes, seed=self.seed)
+            self.entropy_bits = plate_entropy_bits()
         every = max(1, p.codesign_steps // 10)
         seg.train()
         if deb is not None:
@@ -198,11 +206,11 @@ class CoDesign:
         for step in bar:
             stats = self._step(step, lens, seg, deb, opt_seg, opt_deb, opt_opt, sampler)
             curves["step"].append(step)
-            for key in ("seg", "deb", "gp"):
+            for key in ("seg", "deb", "gp", "bits"):
                 curves[key].append(stats.get(key, math.nan))
             curves["coefficients_um"].append([float(c) for c in lens.coefficients_um.detach().cpu()])
             curves["psf_radius_px"].append(stats["psf_radius_px"])
-            bar.set_postfix({k: f"{v:.3g}" for k, v in stats.items() if k != "psf_radius_px"})
+            bar.set_postfix({k: f"{v:.3g}" for k, v in stats.items() if k not in ("psf_radius_px", "ceiling")})
             if on_step is not None:
                 on_step(step, stats)
             done_here += 1
@@ -253,7 +261,14 @@ class CoDesign:
         if opt_opt is not None:
             coeffs = lens.coefficients_um
             seg_term = scheme.lambda_seg * F.cross_entropy(segment_logits(seg, sensor), y, ignore_index=IGNORE)
-            if deb is None:
+            if scheme.balance == "info":
+                nsr = noise_to_signal(lens, self.spectrum.mean_radiance)
+                bits = plate_bits(lens.psf(), self.spectrum, scheme.info_width_px, nsr)
+                ceiling = (bits + 1.0) / self.entropy_bits  # unclipped: keeps its gradient above 1
+                stats["bits"] = bits.item()
+                stats["ceiling"] = float(fano_ceiling(bits.item(), self.entropy_bits))
+                total = seg_term + scheme.lambda_info * torch.relu(ceiling - scheme.info_eps)
+            elif deb is None:
                 total = seg_term
             else:
                 deb_term = F.mse_loss(deb(sensor), x)

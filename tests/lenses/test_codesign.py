@@ -21,7 +21,7 @@ def run(scheme, tmp_path, profile=TINY, seed=0):
     return CoDesign(load_spec(START_SPEC), SCHEMES[scheme], profile, seed, "cpu", tmp_path)
 
 
-@pytest.mark.parametrize("scheme", ["os", "os-d-1", "os-d-100", "os-d-1000", "os-d-mtadam", "gp"])
+@pytest.mark.parametrize("scheme", ["os", "os-d-1", "os-d-100", "os-d-1000", "os-d-mtadam", "gp", "os-info"])
 def test_one_step_of_each_scheme_moves_the_optics(scheme, tmp_path):
     profile = dataclasses.replace(TINY, codesign_steps=1)
     seen = {}
@@ -32,7 +32,19 @@ def test_one_step_of_each_scheme_moves_the_optics(scheme, tmp_path):
     assert trained.lens.spec.mask.bounds_um == load_spec(START_SPEC).mask.bounds_um
     if scheme == "gp":
         assert torch.isfinite(torch.tensor(seen["gp"]))
-    assert (trained.adversary is None) == (scheme == "os")
+    assert (trained.adversary is None) == (scheme in ("os", "os-info"))
+
+
+def test_os_info_step_lowers_the_bound(tmp_path):
+    from benchmark.plate_spectrum import cached_plate_spectrum
+    from lenses.bound import noise_to_signal, plate_bits
+    profile = dataclasses.replace(TINY, codesign_steps=2)
+    trained = run("os-info", tmp_path, profile).train(progress=False)
+    bits = trained.record["curves"]["bits"]
+    spectrum = cached_plate_spectrum(tmp_path, profile.bound_scenes)
+    lens = trained.lens
+    final = float(plate_bits(lens.psf(), spectrum, 32, noise_to_signal(lens, spectrum.mean_radiance)))
+    assert final < bits[0], (bits, final)
 
 
 def test_gradient_penalty_reaches_the_optics():
