@@ -51,11 +51,15 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--seeds", type=_seeds, default=[0], help="comma-separated seeds, e.g. 0,1,2 (default 0)")
     run.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
     run.add_argument("--out", type=Path, default=None, help="output folder (default runs/<date-time>)")
+    run.add_argument("--publish", action="store_true",
+                     help="also write one leaderboard entry per lens to leaderboard/entries/ and re-render it")
     run.add_argument("--plate-format", default=None, metavar="FORMAT",
                      help="plate strings the privacy bound counts: L = letter, D = digit (default: the scene generator's)")
     run.add_argument("--frames", type=int, default=30, metavar="T",
                      help="frames of a static plate for the video bound (default 30; T = 1 is always reported)")
     sub.add_parser("list", help="list registered lenses, attackers and scene sets")
+    rep = sub.add_parser("report", help="render leaderboard/README.md and charts from leaderboard/entries/")
+    rep.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
     return parser
 
 
@@ -98,12 +102,18 @@ def cmd_run(args: argparse.Namespace) -> int:
     cfg = runner.RunConfig(lenses=args.lens, attacks=args.attack, scenes=args.scenes, profile=profile,
                            seeds=args.seeds, device=args.device, plate_format=plate_format, frames=args.frames)
 
+    lens_info: dict[str, dict] = {}
+
     def pictures(outcome: runner.LensOutcome, seed: int) -> None:
         scores = {r["attack"]: f"PSNR {r['psnr_db']:.2f} dB, SSIM {r['ssim']:.3f}"
                   for r in outcome.rows if "psnr_db" in r}
-        report.write_sample_grid(out / f"samples_{outcome.lens.name}_seed{seed}.png", outcome.lens.name,
+        name = outcome.rows[0]["lens"]
+        report.write_sample_grid(out / f"samples_{name}_seed{seed}.png", name,
                                  outcome.lens.psf().detach().cpu().numpy(), outcome.scene, outcome.sensor,
                                  outcome.restored, scores)
+        spec = outcome.lens.current_spec()
+        lens_info.setdefault(name, {"coefficients_um": list(spec.mask.zernike_um), "spec": spec.to_dict(),
+                                    "samples": out / f"samples_{name}_seed{seed}.png"})
 
     t0 = time.perf_counter()
     rows, plates = runner.run(cfg, on_lens=pictures)
@@ -113,8 +123,34 @@ def cmd_run(args: argparse.Namespace) -> int:
         report.write_plate_records(out, plates)
     table = report.write_tables(out, rows)
     print((out / "table.md").read_text())
+    if args.publish:
+        publish_run(rows, profile, lens_info)
     print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({len(table)} table rows, "
           f"{meta['wall_s']:.1f} s)")
+    return 0
+
+
+def publish_run(rows: list[dict], profile, lens_info: dict[str, dict]) -> None:
+    import shutil
+
+    from benchmark import leaderboard, leaderboard_report
+    paths = leaderboard.publish(rows, profile.to_dict(), lens_info)
+    samples = leaderboard.LEADERBOARD / "samples"
+    samples.mkdir(parents=True, exist_ok=True)
+    for name, info in lens_info.items():
+        shutil.copyfile(info["samples"], samples / f"{name}__{profile.name}.png")
+    leaderboard_report.render()
+    print(f"published {len(paths)} leaderboard entries; rendered {leaderboard.LEADERBOARD / 'README.md'}")
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from benchmark import leaderboard, leaderboard_report
+    directory = args.dir or leaderboard.LEADERBOARD
+    if not (directory / "entries").is_dir():
+        raise ValueError(f"no leaderboard entries in {directory / 'entries'}; publish some with "
+                         "`python -m benchmark run --lens NAME --publish`")
+    for path in leaderboard_report.render(directory):
+        print(f"wrote {path}")
     return 0
 
 
@@ -122,7 +158,8 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     args = build_parser().parse_args(argv)
     try:
-        return cmd_list() if args.command == "list" else cmd_run(args)
+        return {"list": cmd_list, "run": cmd_run, "report": cmd_report}[args.command](*(
+            () if args.command == "list" else (args,)))
     except (ValueError, LookupError, NotImplementedError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -38,15 +38,14 @@ def write_plate_records(out: Path, records: list[dict]) -> Path:
 
 
 def summary_table(rows: list[dict]) -> pd.DataFrame:
-    """One line per (lens, attack, profile, scenes): metric means, with std over seeds when several."""
+    """One line per (lens, attack, profile, scenes): metric means and, with several seeds, stds."""
     df = pd.DataFrame(rows)
     metrics = [c for c in METRIC_COLUMNS if c in df.columns and c != "threat_model"]
     group = df.groupby(ID_COLUMNS, sort=False)
     table = group[metrics].mean()
     seeds = group["seed"].nunique()
     if int(seeds.max()) > 1:
-        std = group[metrics].std(ddof=1).add_suffix("_std")
-        table = table.join(std)
+        table = table.join(group[metrics].std(ddof=1).add_suffix("_std"))
     if "threat_model" in df.columns:
         table.insert(0, "threat_model", group["threat_model"].first())
     table.insert(0, "seeds", seeds)
@@ -61,12 +60,27 @@ def _fmt(v: object) -> str:
     return "" if v is None else str(v)
 
 
+def markdown_table(table: pd.DataFrame) -> str:
+    """The summary as markdown, a metric and its seed std in one cell ("mean ± std")."""
+    shown = table[[c for c in table.columns if not c.endswith("_std")]].copy().astype(object)
+    for col in shown.columns:
+        std_col = f"{col}_std"
+        cells = []
+        for i, v in enumerate(table[col]):
+            text = _fmt(v)
+            if std_col in table.columns and text and not math.isnan(table[std_col].iloc[i]):
+                text += f" ± {_fmt(float(table[std_col].iloc[i]))}"
+            cells.append(text)
+        shown[col] = cells
+    return shown.to_markdown(index=False)
+
+
 def write_tables(out: Path, rows: list[dict]) -> pd.DataFrame:
     """table.csv (every row, full precision) and table.md (the seed summary, rounded)."""
     out = Path(out)
     atomic_write_text(out / "table.csv", pd.DataFrame(rows).to_csv(index=False))
     table = summary_table(rows)
-    atomic_write_text(out / "table.md", table.map(_fmt).to_markdown(index=False) + "\n")
+    atomic_write_text(out / "table.md", markdown_table(table) + "\n")
     return table
 
 

@@ -1,0 +1,177 @@
+"""Render leaderboard/README.md and its charts from the entries alone (`python -m benchmark report`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from benchmark.cache import atomic_write_text  # noqa: E402
+from benchmark.leaderboard import LEADERBOARD, load_entries, metric, worst_case  # noqa: E402
+
+# Fixed metadata so that the same entries give byte-identical PNGs.
+_PNG_META = {"Software": None}
+
+
+def _pm(value: tuple[float, float] | tuple[float, float, str] | None, digits: int = 3, pct: bool = False) -> str:
+    if value is None:
+        return ""
+    mean, std = value[0], value[1]
+    scale = 100.0 if pct else 1.0
+    text = f"{mean * scale:.{digits}f}"
+    return text + (f" ± {std * scale:.{digits}f}" if std else "")
+
+
+def pareto_front(points: list[tuple[float, float]]) -> list[int]:
+    """Indices of points not dominated when minimising x (attacker strength) and maximising y (utility)."""
+    front = []
+    for i, (x, y) in enumerate(points):
+        if not any((x2 <= x and y2 >= y) and (x2 < x or y2 > y) for j, (x2, y2) in enumerate(points) if j != i):
+            front.append(i)
+    return sorted(front, key=lambda i: points[i][0])
+
+
+def main_table(entries: list[dict]) -> str:
+    head = ("| lens | profile | scenes | seeds | mIoU | mA | OA | worst PSNR dB (attacker) | worst SSIM | "
+            "worst plate acc % (chain) | W_5% px (T=1) | lens img/s |")
+    lines = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
+    for e in entries:
+        psnr = worst_case(e, "psnr_db", "restorer")
+        ssim = worst_case(e, "ssim", "restorer")
+        plate = worst_case(e, "plate_acc", "reader")
+        width = metric(e, "bound", "bound_width_eps_t1")
+        speed = metric(e, "lens", "images_per_s")
+        lines.append("| " + " | ".join([
+            e["lens"], e["profile"], e["scenes"], ",".join(map(str, e["seeds"])),
+            _pm(metric(e, "utility", "miou")), _pm(metric(e, "utility", "mean_acc")), _pm(metric(e, "utility", "overall_acc")),
+            f"{_pm(psnr, 2)} ({psnr[2]})" if psnr else "", _pm(ssim) if ssim else "",
+            f"{_pm(plate, 1, pct=True)} ({plate[2]})" if plate else "",
+            f"{width[0]:.0f}" if width else "", f"{speed[0]:.1f}" if speed else ""]) + " |")
+    return "\n".join(lines)
+
+
+def attacker_table(entries: list[dict]) -> str:
+    head = "| lens | attack | threat model | PSNR dB | SSIM | plate acc % | plate CER | fit s | img/s |"
+    lines = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
+    for e in entries:
+        for row in e["rows"]:
+            if row["attack"] in ("lens", "utility", "bound"):
+                continue
+            m = lambda name: metric(e, row["attack"], name)  # noqa: E731
+            fit, speed = m("fit_s"), m("images_per_s")
+            lines.append("| " + " | ".join([
+                e["lens"], row["attack"], row.get("threat_model", ""), _pm(m("psnr_db"), 2), _pm(m("ssim")),
+                _pm(m("plate_acc"), 1, pct=True), _pm(m("plate_cer")), f"{fit[0]:.1f}" if fit else "",
+                f"{speed[0]:.2f}" if speed else ""]) + " |")
+    return "\n".join(lines)
+
+
+def tradeoff_chart(entries: list[dict], path: Path, privacy: str, kind: str, xlabel: str, scale: float = 1.0) -> Path | None:
+    pts, labels, errs = [], [], []
+    for e in entries:
+        util, worst = metric(e, "utility", "miou"), worst_case(e, privacy, kind)
+        if util is None or worst is None:
+            continue
+        pts.append((worst[0] * scale, util[0]))
+        errs.append((worst[1] * scale, util[1]))
+        labels.append(f"{e['lens']} ({e['profile']})")
+    if not pts:
+        return None
+    fig, ax = plt.subplots(figsize=(7, 5))
+    for (x, y), (ex, ey), label in zip(pts, errs, labels):
+        ax.errorbar(x, y, xerr=ex or None, yerr=ey or None, fmt="o", capsize=3)
+        ax.annotate(label, (x, y), textcoords="offset points", xytext=(5, 4), fontsize=8)
+    front = pareto_front(pts)
+    ax.plot([pts[i][0] for i in front], [pts[i][1] for i in front], "k--", lw=1, label="Pareto front")
+    ax.set_xlabel(xlabel + " (lower = more private)")
+    ax.set_ylabel("utility mIoU (higher = more useful)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100, metadata=_PNG_META)
+    plt.close(fig)
+    return path
+
+
+def attacker_speed_chart(entries: list[dict], path: Path) -> Path | None:
+    series: dict[str, list[tuple[float, float]]] = {}
+    for e in entries:
+        for row in e["rows"]:
+            mt = row["metrics"]
+            if "psnr_db" in mt and "images_per_s" in mt:
+                series.setdefault(row["attack"], []).append((mt["images_per_s"]["mean"], mt["psnr_db"]["mean"]))
+    if not series:
+        return None
+    fig, ax = plt.subplots(figsize=(7, 5))
+    for name, pts in sorted(series.items()):
+        ax.scatter([p[0] for p in pts], [p[1] for p in pts], label=name, s=18)
+    ax.set_xscale("log")
+    ax.set_xlabel("images / s (log)")
+    ax.set_ylabel("PSNR dB against the sharp scene")
+    ax.set_title("Attackers: speed against accuracy (one point per lens)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100, metadata=_PNG_META)
+    plt.close(fig)
+    return path
+
+
+def profile_chart(entries: list[dict], path: Path) -> Path | None:
+    """Utility and worst-case PSNR of each lens per training profile (smoke vs quick vs paper)."""
+    by_lens: dict[str, dict[str, tuple]] = {}
+    for e in entries:
+        util, worst = metric(e, "utility", "miou"), worst_case(e, "psnr_db", "restorer")
+        if util and worst:
+            by_lens.setdefault(e["lens"], {})[e["profile"]] = (util[0], worst[0])
+    by_lens = {k: v for k, v in by_lens.items() if len(v) > 1}
+    if not by_lens:
+        return None
+    order = ["smoke", "quick", "paper"]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for lens, per in sorted(by_lens.items()):
+        profs = [p for p in order if p in per]
+        axes[0].plot(profs, [per[p][0] for p in profs], "o-", label=lens)
+        axes[1].plot(profs, [per[p][1] for p in profs], "o-", label=lens)
+    axes[0].set_ylabel("mIoU")
+    axes[1].set_ylabel("worst-case PSNR dB")
+    for ax in axes:
+        ax.set_xlabel("profile (training budget)")
+        ax.grid(alpha=0.3)
+    axes[1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100, metadata=_PNG_META)
+    plt.close(fig)
+    return path
+
+
+def render(directory: Path = LEADERBOARD) -> list[Path]:
+    """Write README.md and charts/*.png of the leaderboard in `directory` from its entries."""
+    entries = load_entries(directory)
+    entries = [e for e in entries if e["lens"] != "sharp"] + [e for e in entries if e["lens"] == "sharp"]
+    charts = directory / "charts"
+    charts.mkdir(parents=True, exist_ok=True)
+    written = [p for p in (
+        tradeoff_chart(entries, charts / "utility_vs_psnr.png", "psnr_db", "restorer", "worst-case attacker PSNR dB"),
+        tradeoff_chart(entries, charts / "utility_vs_plates.png", "plate_acc", "reader",
+                       "worst-case plate accuracy %", 100.0),
+        attacker_speed_chart(entries, charts / "attackers_speed_vs_psnr.png"),
+        profile_chart(entries, charts / "profiles.png"),
+    ) if p is not None]
+    text = ["# Leaderboard", "",
+            "Rendered by `python -m benchmark report` from `leaderboard/entries/*.json` (written by "
+            "`python -m benchmark run ... --publish`); never edited by hand. Mean ± standard deviation over the seeds "
+            "listed. Worst case = the strongest attacker of the suite for that lens; W_5% = the plate width below which "
+            "the attack-independent bound certifies that no attacker reads more than 5 % of plates.", "",
+            "## Utility against privacy", "", main_table(entries), "",
+            "## Every attacker", "", attacker_table(entries), "", "## Charts", ""]
+    text += [f"![{p.stem}](charts/{p.name})" for p in written]
+    samples = sorted((directory / "samples").glob("*.png")) if (directory / "samples").is_dir() else []
+    if samples:
+        text += ["", "## Sample images", ""] + [f"![{p.stem}](samples/{p.name})" for p in samples]
+    readme = directory / "README.md"
+    atomic_write_text(readme, "\n".join(text) + "\n")
+    return [readme, *written]
