@@ -160,6 +160,6 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return {"list": cmd_list, "run": cmd_run, "report": cmd_report}[args.command](*(
             () if args.command == "list" else (args,)))
-    except (ValueError, LookupError, NotImplementedError) as exc:
+    except (ValueError, LookupError, NotImplementedError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -11,6 +11,8 @@ import difflib
 
 import numpy as np
 
+from .cityscapes import PREFIX as CITYSCAPES_PREFIX
+from .cityscapes import cityscapes_root, count_available, load_cityscapes_scene
 from .labels import IGNORE_ID
 from .photos import load_photo
 from .records import Scene
@@ -36,6 +38,9 @@ def load_scene(scene_set: str, split: str, index: int, size: tuple[int, int] = (
     """Scene ``index`` of ``split`` in ``scene_set`` at ``size = (H, W)`` pixels (see ``load_scenes``)."""
     _check_arguments(scene_set, split, size)
     s = scene_seed(split, seed, index)
+    if scene_set.startswith(CITYSCAPES_PREFIX):
+        root = cityscapes_root(scene_set)
+        return load_cityscapes_scene(root, split, index, size, s, f"cityscapes/{split}/{seed}/{index:05d}")
     if scene_set == "photos":
         name, image = load_photo(split, index, size, np.random.default_rng(s))
         labels = np.full(size, IGNORE_ID, dtype=np.uint8)
@@ -48,10 +53,13 @@ def load_scenes(scene_set: str, split: str, n: int, size: tuple[int, int] = (512
 
     ``scene_set``: "synthetic", "photos" or "cityscapes:PATH". ``size`` = (H, W) in pixels.
     Bit-identical for identical arguments; scene i is the same whatever ``n`` is.
+    Cityscapes returns ``min(n, images in the split)`` scenes, with a logged warning when fewer.
     """
     _check_arguments(scene_set, split, size)
     if n < 0:
         raise ValueError(f"number of scenes must be >= 0, got {n}")
+    if scene_set.startswith(CITYSCAPES_PREFIX):
+        n = count_available(cityscapes_root(scene_set), split, n)
     return [load_scene(scene_set, split, i, size, seed) for i in range(n)]
 
 
@@ -63,11 +71,9 @@ def _check_arguments(scene_set: str, split: str, size: tuple[int, int]) -> None:
 
 
 def _check_scene_set(scene_set: str) -> None:
-    if scene_set.startswith("cityscapes:"):
-        raise NotImplementedError(
-            f"scene set {scene_set!r}: the Cityscapes loader is not implemented yet; "
-            "use 'synthetic' or 'photos' for now")
-    if scene_set not in ("synthetic", "photos"):
+    if scene_set.startswith(CITYSCAPES_PREFIX):
+        cityscapes_root(scene_set)
+    elif scene_set not in ("synthetic", "photos"):
         raise ValueError(_unknown("scene set", scene_set, list(SCENE_SETS)))
 
 

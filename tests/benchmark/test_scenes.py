@@ -191,10 +191,10 @@ def test_unknown_scene_set_suggests_a_close_match(bad, suggestion):
         load_scenes(bad, "train", 1)
 
 
-def test_unknown_split_suggests_and_cityscapes_is_not_yet_implemented():
+def test_unknown_split_suggests_and_a_missing_cityscapes_root_is_named():
     with pytest.raises(ValueError, match="unknown split 'tset'.*'test'"):
         load_scenes("synthetic", "tset", 1)
-    with pytest.raises(NotImplementedError, match="Cityscapes"):
+    with pytest.raises(FileNotFoundError, match="not an existing folder"):
         load_scenes("cityscapes:/data/cityscapes", "train", 1)
     assert set(SCENE_SETS) >= {"synthetic", "photos"} and all(SCENE_SETS.values())
 
