@@ -133,6 +133,8 @@ class Attack(ABC):
     name: ClassVar[str]
     threat_model: ClassVar[ThreatModel]
     requires: ClassVar[frozenset[str]] = frozenset()
+    # False: the attacker runs only when named (e.g. a much slower variant of a default one).
+    run_by_default: ClassVar[bool] = True
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)

@@ -7,6 +7,7 @@ import datetime as _dt
 import json
 import logging
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -51,16 +52,51 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--seeds", type=_seeds, default=[0], help="comma-separated seeds, e.g. 0,1,2 (default 0)")
     run.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
     run.add_argument("--out", type=Path, default=None, help="output folder (default runs/<date-time>)")
+    run.add_argument("--executor", default="local", metavar="local|ray|ray://HOST:PORT",
+                     help="where tasks run: here (default), a local Ray instance, or a Ray cluster")
     run.add_argument("--publish", action="store_true",
                      help="also write one leaderboard entry per lens to leaderboard/entries/ and re-render it")
     run.add_argument("--plate-format", default=None, metavar="FORMAT",
                      help="plate strings the privacy bound counts: L = letter, D = digit (default: the scene generator's)")
     run.add_argument("--frames", type=int, default=30, metavar="T",
                      help="frames of a static plate for the video bound (default 30; T = 1 is always reported)")
+    train = sub.add_parser("train", help="train (or load) a co-designed lens; under torchrun, data-parallel over the ranks")
+    train.add_argument("--lens", required=True, choices=_codesign_lenses(), help="co-design scheme registered as a lens")
+    train.add_argument("--profile", default="quick", choices=list(PROFILES), help="run size (default: quick)")
+    train.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
+    train.add_argument("--device", type=_device, default="cpu",
+                       help="cpu (default; gloo under torchrun) or cuda (NCCL under torchrun, one GPU per rank)")
     sub.add_parser("list", help="list registered lenses, attackers and scene sets")
     rep = sub.add_parser("report", help="render leaderboard/README.md and charts from leaderboard/entries/")
     rep.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
     return parser
+
+
+def _codesign_lenses() -> list[str]:
+    from lenses.codesign.schemes import SCHEMES
+    return [name for name, scheme in SCHEMES.items() if scheme.optics]  # "fixed" is no registered lens
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from benchmark.cache import cache_root
+    from benchmark.profiles import get_profile
+    from lenses.codesign.builtin import START_SPEC
+    from lenses.codesign.distributed import session
+    from lenses.codesign.schemes import SCHEMES
+    from lenses.codesign.trainer import CoDesign
+    from lenses.spec import load_spec
+
+    with session(args.device) as (replicas, device):
+        run = CoDesign(load_spec(START_SPEC), SCHEMES[args.lens], get_profile(args.profile), args.seed, device,
+                       cache_root(), replicas=replicas)
+        trained = run.load_or_train()
+        if replicas is None or replicas.is_writer:
+            record = trained.record
+            print(f"{args.lens}: artifacts in {trained.directory} (trained on {record.get('world_size', 1)} "
+                  f"process(es), {record['seconds_per_step'] or 0:.3f} s/step)")
+            print("final coefficients (um, Noll Z1..Z6): "
+                  + ", ".join(f"{c:+.5f}" for c in record["final_coefficients_um"]))
+    return 0
 
 
 def cmd_list() -> int:
@@ -102,43 +138,36 @@ def cmd_run(args: argparse.Namespace) -> int:
     cfg = runner.RunConfig(lenses=args.lens, attacks=args.attack, scenes=args.scenes, profile=profile,
                            seeds=args.seeds, device=args.device, plate_format=plate_format, frames=args.frames)
 
-    lens_info: dict[str, dict] = {}
-
-    def pictures(outcome: runner.LensOutcome, seed: int) -> None:
-        scores = {r["attack"]: f"PSNR {r['psnr_db']:.2f} dB, SSIM {r['ssim']:.3f}"
-                  for r in outcome.rows if "psnr_db" in r}
-        name = outcome.rows[0]["lens"]
-        report.write_sample_grid(out / f"samples_{name}_seed{seed}.png", name,
-                                 outcome.lens.psf().detach().cpu().numpy(), outcome.scene, outcome.sensor,
-                                 outcome.restored, scores)
-        spec = outcome.lens.current_spec()
-        lens_info.setdefault(name, {"coefficients_um": list(spec.mask.zernike_um), "spec": spec.to_dict(),
-                                    "samples": out / f"samples_{name}_seed{seed}.png"})
-
+    from benchmark import executors
+    executors.get(args.executor)  # fails fast on a bad name or a missing Ray
     t0 = time.perf_counter()
-    rows, plates = runner.run(cfg, on_lens=pictures)
-    meta = {"command": sys.argv, "profile": profile.to_dict(), "wall_s": time.perf_counter() - t0}
+    result = runner.run(cfg, executor=args.executor)
+    rows, plates = result.rows, result.plates
+    meta = {"command": sys.argv, "profile": profile.to_dict(), "executor": args.executor,
+            "wall_s": time.perf_counter() - t0}
     report.write_results(out, rows, meta)
+    for picture in result.pictures:
+        shutil.copyfile(picture, out / picture.name)
     if plates:
         report.write_plate_records(out, plates)
     table = report.write_tables(out, rows)
     print((out / "table.md").read_text())
     if args.publish:
-        publish_run(rows, profile, lens_info)
+        publish_run(rows, profile, result.lens_info, out)
     print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({len(table)} table rows, "
           f"{meta['wall_s']:.1f} s)")
     return 0
 
 
-def publish_run(rows: list[dict], profile, lens_info: dict[str, dict]) -> None:
-    import shutil
-
+def publish_run(rows: list[dict], profile, lens_info: dict[str, dict], out: Path) -> None:
     from benchmark import leaderboard, leaderboard_report
     paths = leaderboard.publish(rows, profile.to_dict(), lens_info)
     samples = leaderboard.LEADERBOARD / "samples"
     samples.mkdir(parents=True, exist_ok=True)
-    for name, info in lens_info.items():
-        shutil.copyfile(info["samples"], samples / f"{name}__{profile.name}.png")
+    for name in lens_info:
+        first = sorted(out.glob(f"samples_{name}_seed*.png"))
+        if first:
+            shutil.copyfile(first[0], samples / f"{name}__{profile.name}.png")
     leaderboard_report.render()
     print(f"published {len(paths)} leaderboard entries; rendered {leaderboard.LEADERBOARD / 'README.md'}")
 
@@ -158,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     args = build_parser().parse_args(argv)
     try:
-        return {"list": cmd_list, "run": cmd_run, "report": cmd_report}[args.command](*(
+        return {"list": cmd_list, "run": cmd_run, "report": cmd_report, "train": cmd_train}[args.command](*(
             () if args.command == "list" else (args,)))
     except (ValueError, LookupError, NotImplementedError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -23,13 +23,12 @@ from benchmark.cache import cache_root, config_hash
 from benchmark.metrics import finite_mean, psnr, ssim
 from benchmark.plates import PlateOutcome, score_scene, summarise
 from benchmark.profiles import Profile
-from benchmark.provenance import provenance
-from benchmark.plate_spectrum import cached_plate_spectrum
+from benchmark.report import write_sample_grid
 from benchmark.scenes import CLASS_NAMES, PLATE_FORMAT, Scene, load_scenes, plate_entropy_bits
 from lenses.bound import PlateSpectrum, bound_row
 from benchmark.utility.scoring import confusion_matrix, predict, scores, window_for
 from lenses.codesign.schemes import SCHEMES
-from lenses.codesign.trainer import CoDesign, pretrain_utility
+from lenses.codesign.trainer import CoDesign
 
 log = logging.getLogger(__name__)
 
@@ -45,18 +44,6 @@ class RunConfig:
     cache_dir: Path = field(default_factory=cache_root)
     plate_format: str = PLATE_FORMAT   # the plate strings the bound's entropy counts
     frames: int = 30                   # T of the video bound (T = 1 is always reported)
-
-
-@dataclass
-class LensOutcome:
-    """What one lens produced for one seed: rows plus the images the report draws."""
-
-    lens: lenses.Lens
-    rows: list[dict]
-    scene: np.ndarray
-    sensor: np.ndarray
-    restored: dict[str, np.ndarray]
-    plates: list[dict] = field(default_factory=list)  # one record per (chain, readable plate)
 
 
 def to_tensor(scenes: list[Scene]) -> torch.Tensor:
@@ -144,7 +131,7 @@ def utility_net_for(lens: lenses.Lens, lens_name: str, seed: int, cfg: RunConfig
     return trained.utility_net, time.perf_counter() - t0
 
 
-def _row(lens_name: str, attack: str, seed: int, cfg: RunConfig, metrics: dict, config: dict, prov: dict) -> dict:
+def make_row(lens_name: str, attack: str, seed: int, cfg: RunConfig, metrics: dict, config: dict, prov: dict) -> dict:
     row = {"lens": lens_name, "attack": attack, "seed": seed, "profile": cfg.profile.name, "scenes": cfg.scenes}
     row.update(metrics)
     row["config_hash"] = config_hash(config)
@@ -180,7 +167,7 @@ def plate_rows(lens_name: str, attack: str, seed: int, cfg: RunConfig, outcomes:
                speed: float, reader: attacks.Reader, config: dict, prov: dict) -> tuple[dict, list[dict]]:
     """The row of one reader chain, and its per-plate records (for charts and galleries)."""
     metrics = {"threat_model": reader.threat_model.value, **summarise(outcomes), "images_per_s": speed}
-    row = _row(lens_name, attack, seed, cfg, metrics, {**config, "attack": attack, "reader": reader.describe()}, prov)
+    row = make_row(lens_name, attack, seed, cfg, metrics, {**config, "attack": attack, "reader": reader.describe()}, prov)
     records = [{"lens": lens_name, "attack": attack, "seed": seed, **o.__dict__} for o in outcomes]
     return row, records
 
@@ -193,57 +180,45 @@ def bound_metrics(lens: lenses.Lens, spectrum: PlateSpectrum, cfg: RunConfig) ->
     return metrics
 
 
-def run_lens(lens_name: str, seed: int, cfg: RunConfig, sharp: torch.Tensor, scenes: list[Scene],
-             attackers: list[attacks.Attack], prov: dict, clean_net: torch.nn.Module | None,
-             spectrum: PlateSpectrum | None = None) -> LensOutcome:
-    """Everything for one lens and one seed."""
+def fit_context(lens: lenses.Lens, cfg: RunConfig, seed: int,
+                lens_net: torch.nn.Module | None) -> attacks.FitContext:
+    """What an attacker of this lens may use: the lens, training pairs, cache, device, seed, profile."""
+    return attacks.FitContext(lens=lens, train_pairs=train_pairs_factory(lens, cfg, seed),
+                              cache_dir=cfg.cache_dir / "attacks", device=cfg.device, seed=seed, profile=cfg.profile,
+                              extras={"segmenter": segmenter(lens_net, cfg) if lens_net is not None else None})
+
+
+def evaluate_lens(lens_name: str, lens: lenses.Lens, seed: int, cfg: RunConfig, scenes: list[Scene],
+                  restorers: list[attacks.Restorer], readers: list[attacks.Reader], prov: dict,
+                  clean_net: torch.nn.Module | None, fit_s: dict[str, float], out_dir: Path
+                  ) -> tuple[list[dict], list[dict], list[str]]:
+    """Every restorer and every reader chain on one lens and seed; sample pictures into `out_dir`.
+
+    Restorers were fitted by their own tasks (`fit_s` their times); fitting again here is a cache hit.
+    Returns the rows, the per-plate records and the picture file names.
+    """
     p = cfg.profile
-    t0 = time.perf_counter()
-    lens = lenses.load(lens_name, profile=p, seed=seed, device=cfg.device, cache_dir=cfg.cache_dir,
-                       scenes=training_scenes(cfg.scenes)).to(cfg.device)
-    lens_fit_s = time.perf_counter() - t0
-    base_config = {"lens": lens.current_spec().to_dict(), "profile": p.to_dict(), "scenes": cfg.scenes, "seed": seed}
-    t0 = time.perf_counter()
+    sharp = to_tensor(scenes)
     sensor = sense(lens, sharp, p.batch_size, seed, cfg.device)
-    lens_s = time.perf_counter() - t0
-    rows = [_row(lens_name, "lens", seed, cfg,
-                 {"images_per_s": sharp.shape[0] / lens_s, "psf_size_px": lens.geometry.psf_size_px,
-                  "psf_energy": float(lens.psf_and_energy()[1].min())},
-                 {**base_config, "attack": "lens"}, prov)]
-    if spectrum is not None:
-        rows.append(_row(lens_name, "bound", seed, cfg, bound_metrics(lens, spectrum, cfg),
-                         {**base_config, "attack": "bound", "plate_format": cfg.plate_format,
-                          "frames": cfg.frames}, prov))
-    lens_net = None
-    if clean_net is not None:
-        lens_net, utility_fit_s = utility_net_for(lens, lens_name, seed, cfg)
-        metrics = {**utility_metrics(lens_net, sensor, scenes, cfg), "fit_s": lens_fit_s + utility_fit_s}
-        rows.append(_row(lens_name, "utility", seed, cfg, metrics, {**base_config, "attack": "utility"}, prov))
-    ctx = attacks.FitContext(lens=lens, train_pairs=train_pairs_factory(lens, cfg, seed),
-                             cache_dir=cfg.cache_dir / "attacks", device=cfg.device, seed=seed, profile=p,
-                             extras={"segmenter": segmenter(lens_net, cfg) if lens_net is not None else None})
+    base_config = {"lens": lens.current_spec().to_dict(), "profile": p.to_dict(), "scenes": cfg.scenes, "seed": seed}
+    lens_net = utility_net_for(lens, lens_name, seed, cfg)[0] if clean_net is not None else None
+    ctx = fit_context(lens, cfg, seed, lens_net)
+    rows: list[dict] = []
     restored: dict[str, torch.Tensor] = {}
-    for attacker in tqdm([a for a in attackers if isinstance(a, attacks.Restorer)], desc=f"{lens_name} restorers",
-                         leave=False):
-        reason = attacker.skip_reason(ctx)
-        if reason:
-            log.info("%s on %s skipped: %s", attacker.name, lens_name, reason)
-            continue
-        t0 = time.perf_counter()
+    for attacker in tqdm(restorers, desc=f"{lens_name} restorers", leave=False):
         attacker.fit(ctx)
-        fit_s = time.perf_counter() - t0
         t0 = time.perf_counter()
         with torch.no_grad():
             out = torch.cat([attacker.restore(b.to(cfg.device)).cpu() for b in batches(sensor, p.batch_size)])
         run_s = time.perf_counter() - t0
         restored[attacker.name] = out
         metrics = restoration_metrics(out, sharp)
-        metrics.update({"threat_model": attacker.threat_model.value, "fit_s": fit_s,
+        metrics.update({"threat_model": attacker.threat_model.value, "fit_s": fit_s[attacker.name],
                         "images_per_s": sharp.shape[0] / run_s})
-        rows.append(_row(lens_name, attacker.name, seed, cfg, metrics,
-                         {**base_config, "attack": attacker.describe()}, prov))
+        rows.append(make_row(lens_name, attacker.name, seed, cfg, metrics,
+                             {**base_config, "attack": attacker.describe()}, prov))
     plates: list[dict] = []
-    for reader in [a for a in attackers if isinstance(a, attacks.Reader)]:
+    for reader in readers:
         reason = reader.skip_reason(ctx)
         if reason:
             log.info("%s on %s skipped: %s", reader.name, lens_name, reason)
@@ -259,13 +234,16 @@ def run_lens(lens_name: str, seed: int, cfg: RunConfig, sharp: torch.Tensor, sce
             row, records = plate_rows(lens_name, chain, seed, cfg, outcomes, speed, reader, base_config, prov)
             rows.append(row)
             plates.extend(records)
+    scores = {r["attack"]: f"PSNR {r['psnr_db']:.2f} dB, SSIM {r['ssim']:.3f}" for r in rows if "psnr_db" in r}
     as_hwc = lambda t: t[0].permute(1, 2, 0).clamp(0, 1).numpy()  # noqa: E731
-    return LensOutcome(lens, rows, as_hwc(sharp), as_hwc(sensor), {k: as_hwc(v) for k, v in restored.items()},
-                       plates)
+    name = f"samples_{lens_name}_seed{seed}.png".replace("/", "_")
+    write_sample_grid(out_dir / name, lens_name, lens.psf().detach().cpu().numpy(), as_hwc(sharp), as_hwc(sensor),
+                      {k: as_hwc(v) for k, v in restored.items()}, scores)
+    return rows, plates, [name]
 
 
 def sharp_reference(seed: int, cfg: RunConfig, sharp: torch.Tensor, scenes: list[Scene],
-                    attackers: list[attacks.Attack], prov: dict, clean_net: torch.nn.Module | None
+                    readers: list[attacks.Reader], prov: dict, clean_net: torch.nn.Module | None
                     ) -> tuple[list[dict], list[dict]]:
     """Rows measured on the sharp scenes themselves (lens `sharp`, the paper's "Original"):
     the clean utility net's scores and every reader."""
@@ -273,11 +251,11 @@ def sharp_reference(seed: int, cfg: RunConfig, sharp: torch.Tensor, scenes: list
     config = {"lens": "sharp", "profile": cfg.profile.to_dict(), "scenes": cfg.scenes, "seed": seed}
     segment = segmenter(clean_net, cfg) if clean_net is not None else None
     if clean_net is not None:
-        rows.append(_row("sharp", "utility", seed, cfg, utility_metrics(clean_net, sharp, scenes, cfg),
-                         {**config, "attack": "utility"}, prov))
+        rows.append(make_row("sharp", "utility", seed, cfg, utility_metrics(clean_net, sharp, scenes, cfg),
+                             {**config, "attack": "utility"}, prov))
     ctx = attacks.FitContext(cache_dir=cfg.cache_dir / "attacks", device=cfg.device, seed=seed, profile=cfg.profile,
                              extras={"segmenter": segment})
-    for reader in [a for a in attackers if isinstance(a, attacks.Reader)]:
+    for reader in readers:
         if reader.skip_reason(ctx):
             continue
         reader.fit(ctx)
@@ -288,39 +266,43 @@ def sharp_reference(seed: int, cfg: RunConfig, sharp: torch.Tensor, scenes: list
     return rows, plates
 
 
-def run(cfg: RunConfig, on_lens: Callable[[LensOutcome, int], None] | None = None) -> tuple[list[dict], list[dict]]:
-    """All rows of a run and the per-plate records of every reader chain.
+@dataclass
+class RunOutput:
+    rows: list[dict]
+    plates: list[dict]
+    pictures: list[Path]                 # sample images written by the tasks
+    lens_info: dict[str, dict]           # per lens: learned coefficients and spec
 
-    `on_lens(outcome, seed)` is called after each lens (for pictures).
-    """
+
+def run(cfg: RunConfig, executor: str = "local") -> RunOutput:
+    """Plan the run's tasks, execute them (locally or on Ray), and collect rows in plan order."""
+    from benchmark import executors, tasks
     selected, failures = attacks.load_all(cfg.attacks)
     for f in failures:
         log.warning("attacker plugin %r failed to load and is skipped: %s", f.name, f.error)
-    prov = provenance(cfg.device)
-    rows: list[dict] = []
-    plates: list[dict] = []
-    for seed in cfg.seeds:
-        torch.manual_seed(seed)
-        scenes = load_scenes(cfg.scenes, "val", cfg.profile.n_val, cfg.profile.image_size, seed)
-        sharp = to_tensor(scenes)
-        t0 = time.perf_counter()
-        clean_net = None
-        if has_labels(scenes):
-            clean_net = pretrain_utility(cfg.profile, seed, cfg.device, cfg.cache_dir, training_scenes(cfg.scenes))
-        spectrum = cached_plate_spectrum(cfg.cache_dir, cfg.profile.bound_scenes, seed=seed)
-        ref_rows, ref_plates = sharp_reference(seed, cfg, sharp, scenes, selected, prov, clean_net)
-        for r in ref_rows:
-            r["wall_s"] = time.perf_counter() - t0
-        rows.extend(ref_rows)
-        plates.extend(ref_plates)
-        for lens_name in tqdm(cfg.lenses, desc=f"seed {seed}: lenses"):
-            t0 = time.perf_counter()
-            outcome = run_lens(lens_name, seed, cfg, sharp, scenes, selected, prov, clean_net, spectrum)
-            wall = time.perf_counter() - t0
-            for r in outcome.rows:
-                r["wall_s"] = wall
-            rows.extend(outcome.rows)
-            plates.extend(outcome.plates)
-            if on_lens is not None:
-                on_lens(outcome, seed)
-    return rows, plates
+    if cfg.attacks is None:
+        selected = [a for a in selected if a.run_by_default]
+    restorers = [a.name if cfg.attacks is None else _spec_for(a, cfg.attacks) for a in selected
+                 if isinstance(a, attacks.Restorer)]
+    readers = [a.name if cfg.attacks is None else _spec_for(a, cfg.attacks) for a in selected
+               if isinstance(a, attacks.Reader)]
+    planned = tasks.plan(cfg, restorers, readers)
+    directory = tasks.run_directory(cfg)
+    results = executors.get(executor).run(planned, cfg, directory)
+    out = RunOutput([], [], [], {})
+    for task in planned:
+        result = results[task.key]
+        out.rows.extend(result.rows)
+        out.plates.extend(result.plates)
+        out.pictures.extend(directory / task.key / name for name in result.meta.get("pictures", []))
+        if task.kind == "lens" and task.lens not in out.lens_info:
+            out.lens_info[task.lens] = {k: result.meta[k] for k in ("coefficients_um", "spec")}
+    return out
+
+
+def _spec_for(attacker: attacks.Attack, requested: list[str]) -> str:
+    """The spec the user gave for this attacker (a name or a file path), so that tasks can reload it."""
+    for spec in requested:
+        if spec == attacker.name or (spec.endswith(f":{type(attacker).__name__}") and ".py:" in spec):
+            return spec
+    return attacker.name

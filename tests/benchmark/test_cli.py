@@ -13,8 +13,10 @@ REQUIRED = {"lens", "attack", "seed", "profile", "scenes", "config_hash", "git_c
 @pytest.fixture(scope="module")
 def smoke_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
+    # The cheap attackers: each registered attacker has its own tests.
     proc = subprocess.run([sys.executable, "-m", "benchmark", "run", "--lens", "ideal", "--lens", "defocus",
-                           "--profile", "smoke", "--out", str(out)], capture_output=True, text=True, timeout=300)
+                           "--attack", "identity", "--attack", "wiener-known-psf", "--attack", "lpdr-oracle",
+                           "--profile", "smoke", "--out", str(out)], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out, proc
 
@@ -32,13 +34,19 @@ def test_rows_follow_the_schema(smoke_run):
     assert results["meta"]["profile"]["name"] == "smoke"
     rows = results["rows"]
     assert {(r["lens"], r["attack"]) for r in rows} >= {
-        (lens, a) for lens in ("ideal", "defocus") for a in ("identity", "wiener-known-psf")}
+        (lens, a) for lens in ("ideal", "defocus")
+        for a in ("lens", "utility", "bound", "identity", "wiener-known-psf", "lpdr-oracle",
+                  "identity>lpdr-oracle", "wiener-known-psf>lpdr-oracle")} | {("sharp", "utility"), ("sharp", "lpdr-oracle")}
     for r in rows:
         assert REQUIRED <= set(r), REQUIRED - set(r)
         assert r["profile"] == "smoke" and r["scenes"] == "synthetic" and r["seed"] == 0
         assert all(not isinstance(v, (dict, list)) for v in r.values()), "rows are flat"
-        if r["attack"] != "lens":
+        if "psnr_db" in r:
             assert 0 < r["ssim"] <= 1 and r["psnr_db"] > 0 and r["fit_s"] >= 0 and r["images_per_s"] > 0
+        if "plate_acc" in r:
+            assert 0 <= r["plate_acc"] <= 1 and r["n_plates"] >= 0
+        if r["attack"] == "utility":
+            assert 0 <= r["miou"] <= r["mean_acc"] + 1e-9 and 0 <= r["overall_acc"] <= 1  # IoU <= recall per class
 
 
 def test_ideal_keeps_psnr_defocus_drops_it_and_wiener_beats_identity(smoke_run):

@@ -1,0 +1,238 @@
+"""Licence-plate detection and recognition (LPDR): vehicles -> plates -> characters.
+
+Sensor-access attack of the paper's section 4.2, in three pluggable stages
+(``attacks/plates/``): vehicles from a segmentation network's car / truck / bus components
+(``lpdr``) or from ground truth (``lpdr-oracle``, the attacker's upper bound); plates inside
+each vehicle's lower part by EasyOCR's CRAFT or an OpenCV morphology detector
+(``plate_detector``); characters by EasyOCR's english_g2 on the upscaled plate crop.
+``reader.last_trace`` keeps every stage's output of the last ``read`` so that an error can
+be attributed to the stage that made it, and ``reader.stage_seconds`` their cumulative time.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any, ClassVar
+
+import numpy as np
+from torch import Tensor
+
+from attacks.base import FitContext, PlateRead, ReadHints, Reader, ThreatModel
+from attacks.plates.detect_craft import detect_craft
+from attacks.plates.detect_opencv import detect_opencv
+from attacks.plates.easyocr_models import load_easyocr
+from attacks.plates.ocr import read_plates
+from attacks.plates.vehicles import expand_box, oracle_vehicles, segmentation_vehicles
+
+__all__ = ["Lpdr", "LpdrCraft", "LpdrOracle", "PlateReaderBase", "StageTrace"]
+
+Box = tuple[int, int, int, int]
+PLATE_DETECTORS = ("craft", "opencv")
+STAGES = ("vehicles", "plates", "ocr")
+
+
+@dataclasses.dataclass
+class StageTrace:
+    """Every stage's output for one image, in full-image pixels.
+
+    Attributes:
+        vehicles: Vehicle boxes from stage 1 (before the size filter).
+        searched: Regions searched for plates (vehicle box + margin, lower part only).
+        plates: Plate boxes from stage 2, each with the index of its vehicle in ``vehicles``.
+        raw_texts: Recognizer output per entry of ``plates``: (raw string, normalised text, score).
+        reads: The reads returned for this image (after filtering and de-duplication).
+    """
+
+    vehicles: list[Box] = dataclasses.field(default_factory=list)
+    searched: list[Box] = dataclasses.field(default_factory=list)
+    plates: list[tuple[int, Box]] = dataclasses.field(default_factory=list)
+    raw_texts: list[tuple[str, str, float]] = dataclasses.field(default_factory=list)
+    reads: list[PlateRead] = dataclasses.field(default_factory=list)
+
+
+class PlateReaderBase(Reader):
+    """The LPDR pipeline; subclasses fix the vehicle stage (``vehicle_source``).
+
+    Args:
+        plate_detector: "opencv" (morphology, the default) or "craft" (EasyOCR's pretrained text
+            detector; ~10x slower per image on 2 CPU cores, see README; registered as lpdr-craft).
+        vehicle_margin: Each vehicle box grows by this fraction of its size on every side.
+        plate_band_top: Only the part of the (grown) vehicle box below this fraction of its
+            height is searched: plates sit on bumpers, in the lower part of a vehicle.
+        min_vehicle_width_px: Narrower vehicles are skipped: an EU plate is at most ~0.29 of a
+            car's width, so a 55 px car carries a plate under 16 px, below the runner's readable
+            width (benchmark/plates.py): nothing there is scored, and skipping it saves OCR time.
+        plate_format: Plate syntax known to the attacker ('L' letter, 'D' digit) used to resolve
+            letter / digit look-alikes in reads of that length; None to read without it.
+        min_chars: Reads with fewer characters are dropped (not a plate).
+        target_width_px, max_mag: Vehicle crops narrower than ``target_width_px`` are magnified
+            (at most ``max_mag`` times) before plate detection.
+    """
+
+    threat_model: ClassVar[ThreatModel] = ThreatModel.SENSOR_ACCESS
+    vehicle_source: ClassVar[str]
+
+    def __init__(self, plate_detector: str = "opencv", vehicle_margin: float = 0.1, plate_band_top: float = 0.4,
+                 min_vehicle_width_px: int = 55, plate_format: str | None = "LLDDDLL", min_chars: int = 3,
+                 target_width_px: int = 256, max_mag: float = 3.0) -> None:
+        if plate_detector not in PLATE_DETECTORS:
+            raise ValueError(f"plate_detector must be one of {PLATE_DETECTORS}, got {plate_detector!r}")
+        if not 0.0 <= plate_band_top < 1.0:
+            raise ValueError(f"plate_band_top must be in [0, 1), got {plate_band_top}")
+        self.plate_detector = plate_detector
+        self.vehicle_margin = vehicle_margin
+        self.plate_band_top = plate_band_top
+        self.min_vehicle_width_px = min_vehicle_width_px
+        self.plate_format = plate_format
+        self.min_chars = min_chars
+        self.target_width_px = target_width_px
+        self.max_mag = max_mag
+        self.gpu = False
+        self.last_trace: list[StageTrace] = []
+        self.stage_seconds: dict[str, float] = dict.fromkeys(STAGES, 0.0)
+        self.images_read = 0
+        self._ocr: Any = None
+
+    def fit(self, ctx: FitContext) -> None:
+        """Load EasyOCR (offline, once per process); nothing is trained."""
+        self.gpu = ctx.device.startswith("cuda")
+        self._ocr = load_easyocr(self.gpu)
+
+    @property
+    def ocr(self) -> Any:
+        """The shared ``easyocr.Reader``, loaded on first use."""
+        if self._ocr is None:
+            self._ocr = load_easyocr(self.gpu)
+        return self._ocr
+
+    def describe(self) -> dict[str, Any]:
+        options = ("plate_detector", "vehicle_margin", "plate_band_top", "min_vehicle_width_px", "plate_format",
+                   "min_chars", "target_width_px", "max_mag")
+        return {**super().describe(), "vehicles": self.vehicle_source, **{k: getattr(self, k) for k in options}}
+
+    def read(self, images: Tensor, hints: ReadHints | None = None) -> list[list[PlateRead]]:
+        """Read the plates of every image; see ``Reader.read``. Also sets ``last_trace``."""
+        if images.ndim != 4 or images.shape[1] != 3:
+            raise ValueError(f"images must be (B, 3, H, W), got shape {tuple(images.shape)}")
+        t0 = time.perf_counter()
+        vehicles = self._vehicles(images, hints)
+        self.stage_seconds["vehicles"] += time.perf_counter() - t0
+        rgb = (images.detach().clamp(0, 1) * 255).round().byte().permute(0, 2, 3, 1).cpu().numpy()
+        self.last_trace = [self._read_one(np.ascontiguousarray(im), boxes) for im, boxes in zip(rgb, vehicles)]
+        self.images_read += len(rgb)
+        return [trace.reads for trace in self.last_trace]
+
+    def _vehicles(self, images: Tensor, hints: ReadHints | None) -> list[list[Box]]:
+        raise NotImplementedError
+
+    def _read_one(self, image: np.ndarray, vehicles: list[Box]) -> StageTrace:
+        trace = StageTrace(vehicles=vehicles)
+        hw = image.shape[:2]
+        crops = []
+        for index, vehicle in enumerate(vehicles):
+            if vehicle[2] - vehicle[0] < self.min_vehicle_width_px:
+                continue
+            x0, y0, x1, y1 = expand_box(vehicle, self.vehicle_margin, hw)
+            y0 += int(self.plate_band_top * (y1 - y0))
+            trace.searched.append((x0, y0, x1, y1))
+            t0 = time.perf_counter()
+            for px0, py0, px1, py1 in self._detect(image[y0:y1, x0:x1]):
+                box = (px0 + x0, py0 + y0, px1 + x0, py1 + y0)
+                cx0, cy0, cx1, cy1 = _grow(box, max(1, round(0.1 * (box[3] - box[1]))), hw)
+                trace.plates.append((index, box))
+                crops.append(image[cy0:cy1, cx0:cx1])
+            self.stage_seconds["plates"] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        results = read_plates(self.ocr, crops, self.plate_format)
+        self.stage_seconds["ocr"] += time.perf_counter() - t0
+        candidates = []
+        for (_, box), result in zip(trace.plates, results):
+            trace.raw_texts.append((result.raw, result.text, result.score))
+            if len(result.text) >= self.min_chars:
+                candidates.append(PlateRead(result.text, (float(box[0]), float(box[1]), float(box[2]), float(box[3])),
+                                            result.score))
+        trace.reads = _deduplicate(candidates)
+        return trace
+
+    def _detect(self, crop: np.ndarray) -> list[Box]:
+        if self.plate_detector == "craft":
+            return detect_craft(self.ocr, crop, self.target_width_px, self.max_mag)
+        return detect_opencv(crop, self.target_width_px, self.max_mag)
+
+
+class Lpdr(PlateReaderBase):
+    """LPDR with vehicles from a segmentation network (``hints.segment``): the realistic attack."""
+
+    name: ClassVar[str] = "lpdr"
+    vehicle_source: ClassVar[str] = "segmentation"
+
+    def skip_reason(self, ctx: FitContext) -> str | None:
+        if ctx.extras.get("segmenter") is None:
+            return ("lpdr finds vehicles with a segmentation network, and this context has none "
+                    "(FitContext.extras['segmenter'] is None); lpdr-oracle reads with ground-truth vehicles")
+        return None
+
+    def _vehicles(self, images: Tensor, hints: ReadHints | None) -> list[list[Box]]:
+        if hints is None or hints.segment is None:
+            raise ValueError("lpdr needs ReadHints(segment=...) (a network mapping images to Cityscapes train "
+                             "ids); got no segment callable. Use lpdr-oracle to read with ground-truth vehicles.")
+        labels = hints.segment(images)
+        if tuple(labels.shape) != (images.shape[0], *images.shape[2:]):
+            raise ValueError(f"hints.segment returned shape {tuple(labels.shape)}, expected (B, H, W) = "
+                             f"{(images.shape[0], *images.shape[2:])}")
+        return [segmentation_vehicles(m) for m in labels.detach().cpu().numpy()]
+
+
+class LpdrOracle(PlateReaderBase):
+    """LPDR with ground-truth vehicle boxes (``hints.vehicle_boxes``): the attacker's upper bound."""
+
+    name: ClassVar[str] = "lpdr-oracle"
+    vehicle_source: ClassVar[str] = "oracle"
+
+    def _vehicles(self, images: Tensor, hints: ReadHints | None) -> list[list[Box]]:
+        if hints is None or hints.vehicle_boxes is None:
+            raise ValueError("lpdr-oracle needs ReadHints(vehicle_boxes=...) (ground-truth vehicle boxes per "
+                             "image); got none")
+        if len(hints.vehicle_boxes) != images.shape[0]:
+            raise ValueError(f"hints.vehicle_boxes has {len(hints.vehicle_boxes)} entries for "
+                             f"{images.shape[0]} images; need one list of boxes per image")
+        hw = (int(images.shape[2]), int(images.shape[3]))
+        return [oracle_vehicles(boxes, hw) for boxes in hints.vehicle_boxes]
+
+
+def _grow(box: Box, pad: int, image_hw: tuple[int, int]) -> Box:
+    """``box`` grown by ``pad`` pixels on every side, clipped to the image."""
+    h, w = image_hw
+    return max(0, box[0] - pad), max(0, box[1] - pad), min(w, box[2] + pad), min(h, box[3] + pad)
+
+
+def _deduplicate(reads: list[PlateRead], max_iou: float = 0.5) -> list[PlateRead]:
+    """Drop reads overlapping a more confident one (the same plate seen from overlapping vehicles)."""
+    kept: list[PlateRead] = []
+    for read in sorted(reads, key=lambda r: -r.score):
+        if all(_iou(read.box_xyxy, k.box_xyxy) <= max_iou for k in kept):
+            kept.append(read)
+    return kept
+
+
+def _iou(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    ix = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
+    iy = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
+    inter = ix * iy
+    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
+    return inter / union if union > 0 else 0.0
+
+
+class LpdrCraft(LpdrOracle):
+    """lpdr-oracle with EasyOCR's CRAFT plate detector, to compare the detectors.
+
+    Not run by default (about 10x slower per image on the CPU than the OpenCV detector): name it
+    with ``--attack lpdr-craft``.
+    """
+
+    name: ClassVar[str] = "lpdr-craft"
+    run_by_default: ClassVar[bool] = False
+
+    def __init__(self, **options: Any) -> None:
+        super().__init__(**{"plate_detector": "craft", **options})

@@ -1,0 +1,118 @@
+"""``nafnet-generic``: a generic deblurring NAFNet that knows nothing of the lens under test.
+
+The sensor-access adversary (paper Sec. 4.2, "Pretrained NAFNet / DeblurGAN-v2"): it only sees
+the camera's sensor images. The paper used GoPro-pretrained weights, which cannot be
+downloaded here, so by default a stand-in is trained in-suite ONCE on generic degradations
+(``attacks.degradations``: identity, Gaussian, motion and disk kernels, random tint,
+Poisson-Gaussian noise, a generic Bayer pipeline) of sharp TRAIN crops. Its cache key holds the
+budget, the training crops and the seed but no lens, so every lens shares the same model.
+
+Before deblurring, the tint is removed by gray-world white balance, as the paper corrects the
+white balance by hand; the training inputs get the same balance, so the network learns to
+undo what gray-world leaves (overall exposure).
+
+Passing ``checkpoint=PATH`` (an official NAFNet GoPro file, ``.pth`` or ``.safetensors``)
+uses those weights instead of training; ``checkpoint_arch`` overrides the GoPro architecture
+(width 32, ``enc_blk_nums=(1, 1, 1, 28)``) for other variants.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+from typing import Any, ClassVar
+
+import torch
+from torch import Tensor
+
+from attacks.base import FitContext, Restorer, ThreatModel
+from attacks.degradations import degrade
+from attacks.gray_world import gray_world_balance
+from attacks.networks.nafnet import load_nafnet_checkpoint
+from attacks.onnx_backend import InferenceEngine, check_backend
+from attacks.restorer_training import (
+    RestorerBudget,
+    collect_pairs,
+    fingerprint,
+    load_or_train,
+    random_crops,
+    train_restorer,
+)
+
+__all__ = ["NafnetGeneric"]
+
+
+class NafnetGeneric(Restorer):
+    """Gray-world white balance, then a NAFNet trained on generic degradations (or a checkpoint).
+
+    Args:
+        checkpoint: Path of a local NAFNet checkpoint to use instead of training; None trains.
+        checkpoint_arch: ``NAFNet`` keyword arguments of the checkpoint (None: GoPro width 32).
+        backend: Inference backend: "auto", "torch" or "onnx" (``attacks.onnx_backend``).
+
+    Attributes:
+        trained: After ``fit``: True if it trained, False if the weights came from the cache
+            or the checkpoint.
+        engine: After ``fit``: the inference engine.
+    """
+
+    name: ClassVar[str] = "nafnet-generic"
+    threat_model: ClassVar[ThreatModel] = ThreatModel.SENSOR_ACCESS
+
+    def __init__(self, checkpoint: str | Path | None = None, checkpoint_arch: dict[str, Any] | None = None,
+                 backend: str = "auto") -> None:
+        self.checkpoint = None if checkpoint is None else Path(checkpoint)
+        if self.checkpoint is not None and not self.checkpoint.is_file():
+            raise FileNotFoundError(f"{self.name}: checkpoint {str(self.checkpoint)!r} does not exist")
+        self.checkpoint_arch = dict(checkpoint_arch or {})
+        self.backend = check_backend(backend)
+        self.budget: RestorerBudget | None = None
+        self.trained: bool | None = None
+        self.engine: InferenceEngine | None = None
+        self._checkpoint_sha256: str | None = None
+
+    def fit(self, ctx: FitContext) -> None:
+        """Load the checkpoint, or train on generic degradations of ``ctx.train_pairs``' sharp
+        crops (loading from ``ctx.cache_dir`` when cached)."""
+        if self.checkpoint is not None:
+            model = load_nafnet_checkpoint(self.checkpoint, **self.checkpoint_arch)
+            self._checkpoint_sha256 = hashlib.sha256(self.checkpoint.read_bytes()).hexdigest()
+            self.trained = False
+        else:
+            if ctx.train_pairs is None:
+                raise ValueError(f"{self.name}: without checkpoint=PATH it trains, and needs "
+                                 "FitContext.train_pairs (sharp TRAIN crops)")
+            budget = RestorerBudget.from_profile(ctx.profile)
+            _, sharp = collect_pairs(ctx.train_pairs, budget.max_train_images)
+            key = {"attack": self.name, "budget": budget.to_dict(), "data": fingerprint(sharp), "seed": ctx.seed}
+            with torch.random.fork_rng(devices=[]):
+                torch.manual_seed(ctx.seed)
+                model = budget.build_nafnet()
+
+            def next_batch(generator: torch.Generator) -> tuple[Tensor, Tensor]:
+                (target,) = random_crops([sharp], budget.batch_size, budget.crop_px, generator)
+                return gray_world_balance(degrade(target, generator)), target
+
+            self.trained = load_or_train(
+                model, ctx.cache_dir, self.name, key,
+                lambda m: train_restorer(m, next_batch, budget.steps, ctx.device, ctx.seed),
+            )
+            self.budget = budget
+        self.engine = InferenceEngine(model.to(ctx.device), self.backend)
+
+    def restore(self, sensor: Tensor) -> Tensor:
+        """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""
+        if self.engine is None:
+            raise RuntimeError(f"{self.name}: call fit(ctx) before restore()")
+        return self.engine(gray_world_balance(sensor)).clamp(0.0, 1.0)
+
+    def describe(self) -> dict[str, Any]:
+        """Configuration: weights source (checkpoint and its SHA-256, or training budget)."""
+        source: dict[str, Any]
+        if self.checkpoint is not None:
+            source = {"checkpoint": str(self.checkpoint), "checkpoint_sha256": self._checkpoint_sha256,
+                      "checkpoint_arch": self.checkpoint_arch}
+        else:
+            source = {"budget": None if self.budget is None else self.budget.to_dict(),
+                      "training": "generic kernels (identity, gaussian, motion, disk), tint, poisson-gaussian"}
+        return {**super().describe(), "backend": self.backend, "white_balance": "gray-world", **source}

@@ -1,0 +1,87 @@
+"""``nafnet-known-pairs``: NAFNet trained on (sensor image, sharp scene) pairs of the lens under test.
+
+The known-pairs adversary (paper Sec. 4.2, "Trained NAFNet"): it has aligned pairs from the
+camera's TRAIN split and trains a dedicated restorer with NAFNet's recipe (negative PSNR,
+AdamW, cosine schedule; ``attacks.restorer_training``), sized by the profile
+(``restorer_steps``, ``nafnet_width``, ``nafnet_*_blocks``). The weights are cached per
+(lens spec, budget, training data, seed), so a second run loads them.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import torch
+from torch import Tensor
+
+from attacks.base import FitContext, Restorer, ThreatModel
+from attacks.onnx_backend import InferenceEngine, check_backend
+from attacks.restorer_training import (
+    RestorerBudget,
+    collect_pairs,
+    fingerprint,
+    lens_key,
+    load_or_train,
+    random_crops,
+    train_restorer,
+)
+
+__all__ = ["NafnetKnownPairs"]
+
+
+class NafnetKnownPairs(Restorer):
+    """NAFNet trained on the lens's own TRAIN pairs; restores sensor images directly.
+
+    Args:
+        backend: Inference backend, "auto" (time torch and ONNX Runtime once, keep the faster),
+            "torch" or "onnx" (``attacks.onnx_backend``).
+
+    Attributes:
+        trained: After ``fit``: True if it trained, False if the weights came from the cache.
+        engine: After ``fit``: the inference engine (``engine.backend`` says which is in use).
+    """
+
+    name: ClassVar[str] = "nafnet-known-pairs"
+    threat_model: ClassVar[ThreatModel] = ThreatModel.KNOWN_PAIRS
+    requires: ClassVar[frozenset[str]] = frozenset({"lens", "train_pairs"})
+
+    def __init__(self, backend: str = "auto") -> None:
+        self.backend = check_backend(backend)
+        self.budget: RestorerBudget | None = None
+        self.trained: bool | None = None
+        self.engine: InferenceEngine | None = None
+
+    def fit(self, ctx: FitContext) -> None:
+        """Train (or load from ``ctx.cache_dir``) a NAFNet on ``ctx.train_pairs``."""
+        assert ctx.lens is not None and ctx.train_pairs is not None  # checked by `requires`
+        budget = RestorerBudget.from_profile(ctx.profile)
+        sensor, sharp = collect_pairs(ctx.train_pairs, budget.max_train_images)
+        key = {"attack": self.name, "budget": budget.to_dict(), "lens": lens_key(ctx.lens),
+               "data": fingerprint(sensor, sharp), "seed": ctx.seed}
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(ctx.seed)
+            model = budget.build_nafnet()
+
+        def next_batch(generator: torch.Generator) -> tuple[Tensor, Tensor]:
+            inp, target = random_crops([sensor, sharp], budget.batch_size, budget.crop_px, generator)
+            return inp, target
+
+        self.trained = load_or_train(
+            model, ctx.cache_dir, self.name, key,
+            lambda m: train_restorer(m, next_batch, budget.steps, ctx.device, ctx.seed),
+        )
+        self.budget = budget
+        self.engine = InferenceEngine(model.to(ctx.device), self.backend)
+
+    def restore(self, sensor: Tensor) -> Tensor:
+        """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""
+        if self.engine is None:
+            raise RuntimeError(f"{self.name}: call fit(ctx) before restore()")
+        return self.engine(sensor).clamp(0.0, 1.0)
+
+    def describe(self) -> dict[str, Any]:
+        """Configuration: backend option, training budget and recipe."""
+        return {**super().describe(), "backend": self.backend,
+                "budget": None if self.budget is None else self.budget.to_dict(),
+                "recipe": "nafnet: -psnr, adamw 1e-3, cosine"}
+

@@ -1,0 +1,142 @@
+"""Stage 3 of the plate attack: read the characters of one plate crop with EasyOCR's english_g2.
+
+An attacker upscales the crop (cubic) to the recognizer's input height, trims it to the text
+(plate borders and the blue EU band otherwise read as 'I', 'L' or '1'), and restricts the
+alphabet to plate characters. Text is normalised to upper-case letters and digits.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import cv2
+import numpy as np
+
+__all__ = ["PLATE_ALPHABET", "OcrResult", "apply_format", "normalise", "prepare_crop", "read_plate", "read_plates", "text_box"]
+
+PLATE_ALPHABET = "ABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789"
+"""Characters the recognizer may output (EasyOCR ``allowlist``)."""
+
+OCR_HEIGHT_PX = 64
+"""Height the crop is upscaled to before reading: english_g2's input height."""
+
+
+@dataclasses.dataclass(frozen=True)
+class OcrResult:
+    """What the recognizer read from one crop: normalised ``text``, raw ``raw`` and ``score`` in [0, 1]."""
+
+    text: str
+    raw: str
+    score: float
+
+
+def normalise(text: str) -> str:
+    """Upper-case and keep only ASCII letters and digits ('ab-12 c' -> 'AB12C')."""
+    return "".join(ch for ch in text.upper() if ch.isascii() and ch.isalnum())
+
+
+# Glyphs the recognizer confuses across the letter / digit divide, resolved by the plate syntax.
+_TO_DIGIT = str.maketrans("OQDIZSBGTA", "0001258674")
+_TO_LETTER = str.maketrans("0125867", "OIZSBGT")
+
+
+def apply_format(text: str, fmt: str | None) -> str:
+    """Resolve letter / digit look-alikes by position when ``text`` fits the plate syntax.
+
+    ``fmt`` uses 'L' for a letter and 'D' for a digit (e.g. "LLDDDLL"); an attacker knows the
+    plate syntax of the country it targets. Text of another length, or ``fmt`` None, is
+    returned unchanged ('0L254VS' -> 'OL254VS', 'SEB94NH' -> 'SE894NH').
+    """
+    if fmt is None or len(text) != len(fmt):
+        return text
+    return "".join(ch.translate(_TO_DIGIT if kind == "D" else _TO_LETTER) for ch, kind in zip(text, fmt))
+
+
+def prepare_crop(crop_rgb: np.ndarray, height_px: int = OCR_HEIGHT_PX) -> np.ndarray:
+    """Single-channel uint8 plate image for the recognizer, ``height_px`` high.
+
+    Uses the HSV value channel max(R, G, B) rather than luma: dark text stays dark while the
+    saturated blue EU band turns light, so it is not read as a character. Upscales (bicubic,
+    aspect kept) and then trims to the text found by ``text_box``.
+
+    Args:
+        crop_rgb: (h, w, 3) uint8 RGB plate crop, h, w >= 1.
+        height_px: Output height in pixels.
+    """
+    if crop_rgb.ndim != 3 or crop_rgb.shape[2] != 3 or min(crop_rgb.shape[:2]) < 1:
+        raise ValueError(f"crop_rgb must be a non-empty (h, w, 3) array, got shape {crop_rgb.shape}")
+    value = crop_rgb.max(axis=2)
+    h, w = value.shape
+    width = max(1, round(w * height_px / h))
+    big = cv2.resize(value, (width, height_px), interpolation=cv2.INTER_CUBIC)
+    x0, y0, x1, y1 = text_box(big)
+    return np.ascontiguousarray(big[y0:y1, x0:x1])
+
+
+def text_box(plate: np.ndarray) -> tuple[int, int, int, int]:
+    """Box (x0, y0, x1, y1) around the dark characters of a light plate, with a small margin.
+
+    Characters are the dark (Otsu) connected components that do not touch the crop's edge
+    (borders and background do) and are 30-100 % of the crop height and narrower than it.
+    Returns the whole crop when no component qualifies.
+    """
+    h, w = plate.shape
+    full = (0, 0, w, h)
+    if h < 4 or w < 4 or int(plate.max()) - int(plate.min()) < 16:
+        return full
+    _, dark = cv2.threshold(plate, 0, 1, cv2.THRESH_BINARY_INV + cv2.THRESH_OTSU)
+    n, _, stats, _ = cv2.connectedComponentsWithStats(dark, connectivity=8)
+    keep = [(x, y, x + cw, y + ch) for x, y, cw, ch, _ in stats[1:n]
+            if x > 0 and y > 0 and x + cw < w and y + ch < h and 0.3 * h <= ch and cw < h]
+    if not keep:
+        return full
+    margin = round(0.12 * h)
+    x0, y0 = min(b[0] for b in keep) - margin, min(b[1] for b in keep) - margin
+    x1, y1 = max(b[2] for b in keep) + margin, max(b[3] for b in keep) + margin
+    return max(0, x0), max(0, y0), min(w, x1), min(h, y1)
+
+
+def read_plate(ocr: Any, crop_rgb: np.ndarray, plate_format: str | None = None) -> OcrResult:
+    """Read one plate crop; see ``read_plates``."""
+    return read_plates(ocr, [crop_rgb], plate_format)[0]
+
+
+def read_plates(ocr: Any, crops_rgb: list[np.ndarray], plate_format: str | None = None) -> list[OcrResult]:
+    """Read several plate crops in one batched recognizer pass.
+
+    Each crop is prepared by ``prepare_crop``; the prepared crops are stacked into one canvas,
+    one ``OCR_HEIGHT_PX`` row each, and recognised as one batch (EasyOCR's per-call overhead
+    dominates single small crops).
+
+    Args:
+        ocr: An ``easyocr.Reader`` (see ``attacks.plates.easyocr_models.load_easyocr``).
+        crops_rgb: (h, w, 3) uint8 RGB crops around one plate each; empty crops read as "".
+        plate_format: Plate syntax for ``apply_format`` ('L' letter, 'D' digit), or None.
+
+    Returns:
+        Per crop, the best line's normalised text, its raw string and confidence in [0, 1];
+        "" with score 0 when the crop is empty or nothing was recognised.
+    """
+    results = [OcrResult("", "", 0.0)] * len(crops_rgb)
+    rows = {i: prepare_crop(c) for i, c in enumerate(crops_rgb) if c.ndim == 3 and min(c.shape[:2]) >= 2}
+    if not rows:
+        return results
+    order = list(rows)
+    canvas = np.full((OCR_HEIGHT_PX * len(order), max(r.shape[1] for r in rows.values())), 255, np.uint8)
+    boxes = []
+    for slot, i in enumerate(order):
+        row = rows[i]
+        y0 = slot * OCR_HEIGHT_PX
+        canvas[y0:y0 + row.shape[0], :row.shape[1]] = row
+        boxes.append([0, row.shape[1], y0, y0 + row.shape[0]])
+    lines = ocr.recognize(canvas, horizontal_list=boxes, free_list=[], allowlist=PLATE_ALPHABET, detail=1,
+                          batch_size=len(boxes))
+    best: dict[int, tuple[str, float]] = {}
+    for box, raw, score in lines:
+        slot = int(box[0][1]) // OCR_HEIGHT_PX
+        if slot not in best or float(score) > best[slot][1]:
+            best[slot] = (raw, float(score))
+    for slot, (raw, score) in best.items():
+        results[order[slot]] = OcrResult(apply_format(normalise(raw), plate_format), raw, score)
+    return results

@@ -1,0 +1,163 @@
+"""``richardson-lucy-known-psf``: the attacker measured the PSF and gain; Richardson-Lucy.
+
+Richardson-Lucy (Richardson 1972, Lucy 1974) is the maximum-likelihood deconvolution under
+Poisson noise, the sensor's dominant noise: starting from a flat 0.5 image, each iteration
+multiplies the estimate by the back-projected ratio of the data to the re-blurred estimate,
+``u <- u * (H^T (y / (H u)))``. It keeps the estimate non-negative, but amplifies noise as
+iterations go on, so the iteration count is the regulariser. It is CHOSEN on the TRAIN split:
+``fit`` runs the ladder ``ITERATION_LADDER`` on a few ``ctx.train_pairs`` batches and keeps the
+count with the best mean PSNR (recorded in ``describe()``).
+
+Implementation: batched per-channel FFT convolutions in torch. As in ``wiener-known-psf``
+(whose helpers it reuses) the sensor image is first divided by the per-channel gain, then
+reflect-padded by the PSF radius with the pad tapered into its circularly blurred copy
+(``edge_taper``), so the circular FFT model holds at the seam; the result is cropped and
+clamped to [0, 1]. In the interior it equals ``skimage.restoration.richardson_lucy``
+(tests/attacks/test_richardson_lucy.py).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from typing import Any, ClassVar
+
+import torch
+import torch.nn.functional as F
+from scipy.fft import next_fast_len
+from torch import Tensor
+
+from attacks.base import FitContext, Restorer, ThreatModel
+from attacks.wiener_known_psf import edge_taper, psf_to_otf
+
+__all__ = ["ITERATION_LADDER", "RichardsonLucyKnownPSF", "richardson_lucy", "richardson_lucy_iterates"]
+
+ITERATION_LADDER: tuple[int, ...] = (1, 2, 3, 5, 8, 13, 20, 30, 50, 80)
+"""Iteration counts tried by ``fit`` (roughly geometric: PSNR changes slowly in log k)."""
+
+_FIT_BATCHES = 2
+# Guards the ratio y / (H u) where the estimate has gone to ~0 (skimage adds 1e-12; a clamp also
+# catches the tiny negative values float FFTs produce).
+_EPS = 1e-12
+
+
+def richardson_lucy_iterates(y: Tensor, psf: Tensor, max_iterations: int, pad: bool = True
+                             ) -> Iterator[tuple[int, Tensor]]:
+    """Yield ``(k, estimate_k)`` for k = 1..max_iterations of Richardson-Lucy.
+
+    Args:
+        y: Blurred non-negative images (B, C, H, W), any scale.
+        psf: (C, K, K) or (K, K), centred at [K // 2, K // 2], channels sum to 1.
+        max_iterations: Last iteration to yield.
+        pad: Reflect-pad by the PSF radius with an edge taper (module docs); False deconvolves
+            circularly.
+
+    Yields:
+        k and the estimate after k iterations, (B, C, H, W), unclamped, same dtype as ``y``.
+    """
+    height, width = y.shape[-2:]
+    psf = psf.to(device=y.device, dtype=y.dtype)
+    top, bottom = _padding(height, psf.shape[-2] // 2) if pad else (0, 0)
+    left, right = _padding(width, psf.shape[-1] // 2) if pad else (0, 0)
+    grid = (height + top + bottom, width + left + right)
+    otf = psf_to_otf(psf, grid)[..., : grid[1] // 2 + 1]
+    data = y
+    if pad:
+        data = edge_taper(F.pad(y, (left, right, top, bottom), mode="reflect"), otf, (top, left))
+    estimate = torch.full_like(data, 0.5)
+    for k in range(1, max_iterations + 1):
+        reblurred = torch.fft.irfft2(torch.fft.rfft2(estimate) * otf, s=grid)
+        ratio = data / (reblurred.clamp_min(0.0) + _EPS)
+        estimate = estimate * torch.fft.irfft2(torch.fft.rfft2(ratio) * otf.conj(), s=grid)
+        yield k, estimate[..., top : top + height, left : left + width]
+
+
+def _padding(size: int, radius: int) -> tuple[int, int]:
+    """(before, after) padding of at least ``radius`` (less than ``size``) that makes the padded
+    length FFT-friendly: 1024 + 2 x 19 = 1062 = 2 x 3^2 x 59 costs several times 1080."""
+    radius = min(radius, size - 1)
+    extra = min(next_fast_len(size + 2 * radius, real=True) - size, 2 * (size - 1))
+    return extra // 2, extra - extra // 2
+
+
+def richardson_lucy(y: Tensor, psf: Tensor, iterations: int, pad: bool = True) -> Tensor:
+    """Richardson-Lucy deconvolution after ``iterations`` iterations (``richardson_lucy_iterates``).
+
+    Returns:
+        Estimate (B, C, H, W), unclamped; ``y`` itself when ``iterations`` is 0.
+    """
+    result = y
+    for _, result in richardson_lucy_iterates(y, psf, iterations, pad):
+        pass
+    return result
+
+
+def _psnr_db(x: Tensor, ref: Tensor) -> Tensor:
+    """PSNR per image (B,) in dB, peak 1."""
+    mse = (x - ref).pow(2).flatten(1).mean(dim=1)
+    return 10.0 * torch.log10(1.0 / mse.clamp_min(1e-12))
+
+
+class RichardsonLucyKnownPSF(Restorer):
+    """Gain division, then Richardson-Lucy with the measured PSF; iterations chosen on TRAIN.
+
+    Args:
+        iterations: Fixed iteration count; None (default) chooses it in ``fit`` from
+            ``ITERATION_LADDER`` on ``ctx.train_pairs``.
+
+    Attributes:
+        ladder_psnr_db: After a choosing ``fit``: mean TRAIN PSNR (dB) per tried count.
+    """
+
+    name: ClassVar[str] = "richardson-lucy-known-psf"
+    threat_model: ClassVar[ThreatModel] = ThreatModel.LENS_ACCESS
+    requires: ClassVar[frozenset[str]] = frozenset({"lens"})
+
+    def __init__(self, iterations: int | None = None) -> None:
+        if iterations is not None and iterations < 1:
+            raise ValueError(f"{self.name}: iterations must be >= 1 or None (choose on TRAIN), got {iterations}")
+        self._fixed = iterations
+        self.iterations = iterations
+        self.ladder_psnr_db: dict[int, float] = {}
+        self._psf: Tensor | None = None
+        self._gain: Tensor | None = None
+
+    def fit(self, ctx: FitContext) -> None:
+        """Measure the PSF and gain; choose the iteration count on ``ctx.train_pairs``."""
+        assert ctx.lens is not None  # checked by `requires`
+        self._psf = ctx.lens.psf().detach()
+        self._gain = ctx.lens.gain().detach()
+        if self._fixed is not None:
+            return
+        if ctx.train_pairs is None:
+            raise ValueError(f"{self.name}: choosing the iteration count needs FitContext.train_pairs; "
+                             "or pass iterations=N")
+        totals = dict.fromkeys(ITERATION_LADDER, 0.0)
+        n_images = 0
+        for batch, (sensor, sharp) in enumerate(ctx.train_pairs()):
+            if batch == _FIT_BATCHES:
+                break
+            with torch.no_grad():
+                for k, estimate in richardson_lucy_iterates(self._divide_gain(sensor), self._psf, ITERATION_LADDER[-1]):
+                    if k in totals:
+                        totals[k] += float(_psnr_db(estimate.clamp(0.0, 1.0), sharp).sum())
+            n_images += sensor.shape[0]
+        self.ladder_psnr_db = {k: total / max(n_images, 1) for k, total in totals.items()}
+        self.iterations = max(self.ladder_psnr_db, key=lambda k: self.ladder_psnr_db[k])
+
+    def _divide_gain(self, sensor: Tensor) -> Tensor:
+        assert self._gain is not None
+        return sensor / self._gain.to(device=sensor.device, dtype=sensor.dtype)[:, None, None]
+
+    def restore(self, sensor: Tensor) -> Tensor:
+        """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""
+        if self._psf is None or self.iterations is None:
+            raise RuntimeError(f"{self.name}: call fit(ctx) before restore()")
+        return richardson_lucy(self._divide_gain(sensor), self._psf, self.iterations).clamp(0.0, 1.0)
+
+    def describe(self) -> dict[str, Any]:
+        """Configuration: the iteration count, how it was chosen, and the ladder's TRAIN PSNRs."""
+        chosen_by = "fixed" if self._fixed is not None else "best mean PSNR on TRAIN pairs"
+        ladder = {str(k): round(v, 3) for k, v in self.ladder_psnr_db.items() if math.isfinite(v)}
+        return {**super().describe(), "iterations": self.iterations, "chosen_by": chosen_by,
+                "ladder_psnr_db": ladder, "padding": "reflect-psf-radius+edge-taper"}

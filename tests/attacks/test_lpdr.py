@@ -1,0 +1,122 @@
+"""The licence-plate readers ``lpdr`` and ``lpdr-oracle`` end to end (attacks/lpdr.py)."""
+
+from __future__ import annotations
+
+import socket
+
+import numpy as np
+import pytest
+import torch
+
+import attacks
+import lenses
+from attacks.lpdr import Lpdr, LpdrOracle, StageTrace
+from attacks.plates import easyocr_models
+from benchmark.plates import readable, score_scene
+from benchmark.scenes import load_scenes
+
+LARGE_PX = 120
+
+
+def _no_network(*args, **kwargs):
+    raise OSError("network access attempted: the plate readers must run offline")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def offline():
+    """Every test here, EasyOCR's loading included, runs with outgoing connections refused."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(socket.socket, "connect", _no_network)
+        easyocr_models.load_easyocr.cache_clear()
+        yield
+
+
+@pytest.fixture(scope="module")
+def large_plate_scenes():
+    """Sharp val scenes holding a readable plate >= LARGE_PX wide, with the vehicles carrying them."""
+    scenes = [s for s in load_scenes("synthetic", "val", 30, (512, 1024), 0)
+              if any(readable(p) and p.box_xyxy[2] - p.box_xyxy[0] >= LARGE_PX for p in s.plates)]
+    assert len(scenes) >= 4, "the synthetic val set no longer has enough large plates for this test"
+    images = torch.from_numpy(np.stack([s.image for s in scenes])).permute(0, 3, 1, 2).float()
+    boxes = [[s.vehicles[p.vehicle_index].box_xyxy for p in s.plates
+              if readable(p) and p.box_xyxy[2] - p.box_xyxy[0] >= LARGE_PX] for s in scenes]
+    return scenes, images, boxes
+
+
+def large_plate_accuracy(reader, images, scenes, boxes) -> float:
+    reads = reader.read(images, attacks.ReadHints(vehicle_boxes=boxes))
+    outcomes = [o for r, s in zip(reads, scenes) for o in score_scene(r, s) if o.width_px >= LARGE_PX]
+    return float(np.mean([o.correct for o in outcomes]))
+
+
+def test_network_is_refused_and_easyocr_loads_offline():
+    with pytest.raises(OSError, match="offline"):
+        socket.socket().connect(("127.0.0.1", 9))
+    reader = attacks.load("lpdr-oracle")
+    reader.fit(attacks.FitContext())
+    assert reader.ocr is easyocr_models.load_easyocr(False)  # one shared copy, loaded once
+
+
+@pytest.mark.parametrize("detector", ["craft", "opencv"])
+def test_large_sharp_plates_are_read_and_defocus_hides_them(detector, large_plate_scenes):
+    scenes, sharp, boxes = large_plate_scenes
+    reader = LpdrOracle(plate_detector=detector)
+    sharp_acc = large_plate_accuracy(reader, sharp, scenes, boxes)
+    with torch.no_grad():
+        sensor = lenses.load("defocus")(sharp, generator=torch.Generator().manual_seed(0))
+    defocus_acc = large_plate_accuracy(reader, sensor, scenes, boxes)
+    print(f"{detector}: large plates sharp {sharp_acc:.2f}, defocus {defocus_acc:.2f}")
+    # CRAFT (the default) is the attack's strength; the classical detector is its weaker baseline.
+    assert sharp_acc >= (0.8 if detector == "craft" else 0.4)
+    assert defocus_acc < sharp_acc
+
+
+def test_trace_attributes_every_stage(large_plate_scenes):
+    scenes, sharp, boxes = large_plate_scenes
+    reader = LpdrOracle()
+    reads = reader.read(sharp[:1], attacks.ReadHints(vehicle_boxes=boxes[:1]))
+    (trace,) = reader.last_trace
+    assert isinstance(trace, StageTrace) and trace.reads == reads[0]
+    assert len(trace.vehicles) == len(boxes[0]) and len(trace.plates) == len(trace.raw_texts) >= 1
+    assert all(0 <= v < len(trace.vehicles) for v, _ in trace.plates)
+    assert {r.text for r in reads[0]} <= {t for _, t, _ in trace.raw_texts}
+    assert reader.stage_seconds["plates"] > 0 and reader.stage_seconds["ocr"] > 0
+
+
+def test_segmentation_reader_uses_the_segment_hint(large_plate_scenes):
+    scenes, sharp, boxes = large_plate_scenes
+    # A segmenter that sees only the vehicle carrying the large plate (keeps the test fast).
+    x0, y0, x1, y1 = boxes[0][0]
+    labels = torch.zeros(1, *sharp.shape[2:], dtype=torch.int64)
+    labels[0, y0:y1, x0:x1] = torch.from_numpy(scenes[0].labels[y0:y1, x0:x1].astype(np.int64))
+    reader = attacks.load("lpdr")
+    reads = reader.read(sharp[:1], attacks.ReadHints(segment=lambda x: labels))
+    assert reader.last_trace[0].vehicles  # components of the car / truck / bus labels
+    truth = {p.text for p in scenes[0].plates if p.box_xyxy[2] - p.box_xyxy[0] >= LARGE_PX}
+    assert truth & {r.text for r in reads[0]}
+
+
+def test_skip_reason_and_missing_hints():
+    lpdr, oracle = Lpdr(), LpdrOracle()
+    assert "segmenter" in lpdr.skip_reason(attacks.FitContext())
+    assert lpdr.skip_reason(attacks.FitContext(extras={"segmenter": object()})) is None
+    assert oracle.skip_reason(attacks.FitContext()) is None
+    images = torch.zeros(1, 3, 32, 64)
+    with pytest.raises(ValueError, match="segment"):
+        lpdr.read(images, attacks.ReadHints(vehicle_boxes=[[]]))
+    with pytest.raises(ValueError, match="vehicle_boxes"):
+        oracle.read(images)
+    with pytest.raises(ValueError, match="one list of boxes per image"):
+        oracle.read(images, attacks.ReadHints(vehicle_boxes=[[], []]))
+    with pytest.raises(ValueError, match="plate_detector"):
+        LpdrOracle(plate_detector="yolo")
+
+
+def test_no_vehicle_and_border_vehicles_are_handled():
+    reader = LpdrOracle(plate_detector="opencv")
+    images = torch.rand(2, 3, 64, 128, generator=torch.Generator().manual_seed(0))
+    reads = reader.read(images, attacks.ReadHints(vehicle_boxes=[[], [(100, 30, 140, 70), (-5, -5, 60, 64)]]))
+    assert reads[0] == [] and len(reads) == 2
+    for read in reads[1]:
+        x0, y0, x1, y1 = read.box_xyxy
+        assert 0 <= x0 < x1 <= 128 and 0 <= y0 < y1 <= 64

@@ -1,0 +1,64 @@
+"""Plate charts (benchmark/charts/plates.py): accuracy-by-width curves and the crop gallery."""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+import torch
+
+from attacks import PlateRead
+from benchmark.charts import plates as charts
+from benchmark.plates import readable
+from benchmark.scenes import load_scenes
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def records() -> list[dict]:
+    rows = []
+    for lens, attack, p_correct in [("sharp", "lpdr-oracle", 1.0), ("gp", "lpdr-oracle", 0.0),
+                                    ("gp", "nafnet-known-pairs>lpdr-oracle", 0.5)]:
+        for width, correct in [(20, False), (70, p_correct >= 0.5), (150, p_correct > 0), (150, p_correct == 1.0)]:
+            rows.append({"lens": lens, "attack": attack, "seed": 0, "scene": "s", "truth": "AB123CD",
+                         "width_px": width, "read": "", "detected": True, "correct": str(correct), "cer": 0.0})
+    return rows
+
+
+def test_width_accuracy_bins_and_pools():
+    curves = charts.width_accuracy(records(), bins_px=(16, 64, 128))
+    edges, acc, counts = curves[("sharp", "lpdr-oracle")]
+    assert list(edges) == [16, 64, 128] and list(counts) == [1, 1, 2]
+    np.testing.assert_allclose(acc, [0.0, 1.0, 1.0])
+    np.testing.assert_allclose(curves[("gp", "nafnet-known-pairs>lpdr-oracle")][1], [0.0, 1.0, 0.5])
+
+
+def test_width_chart_has_one_curve_per_chain(tmp_path, monkeypatch):
+    saved = []
+    monkeypatch.setattr(plt, "close", lambda fig: saved.append(fig))
+    path = charts.write_plate_width_chart(records(), tmp_path / "plates" / "width.png")
+    assert path.read_bytes()[:8] == PNG_MAGIC
+    (ax,) = saved[0].axes
+    assert len(ax.get_lines()) == 3
+    assert {t.get_text().split(" (")[0] for t in ax.get_legend().get_texts()} == {
+        "sharp / lpdr-oracle", "gp / lpdr-oracle", "gp / nafnet-known-pairs>lpdr-oracle"}
+    with pytest.raises(ValueError, match="no plate records"):
+        charts.write_plate_width_chart([], tmp_path / "empty.png")
+
+
+def test_gallery_shows_every_source_and_what_was_read(tmp_path, monkeypatch):
+    scenes = load_scenes("synthetic", "val", 2, (512, 1024), 0)
+    sharp = torch.from_numpy(np.stack([s.image for s in scenes])).permute(0, 3, 1, 2)
+    plate = next(p for p in scenes[0].plates if readable(p))
+    reads = {"sharp": [[PlateRead(plate.text, tuple(map(float, plate.box_xyxy)), 0.9)], []]}
+    saved = []
+    monkeypatch.setattr(plt, "close", lambda fig: saved.append(fig))
+    images = {"sharp": sharp, "sensor": sharp * 0.5, "wiener-known-psf": sharp.flip(-1)}
+    path = charts.write_plate_gallery(images, scenes, reads, tmp_path / "gallery.png", max_plates=3)
+    assert path.read_bytes()[:8] == PNG_MAGIC
+    axes = saved[0].axes
+    assert len(axes) == 3 * 3
+    titles = [ax.get_title() for ax in axes]
+    assert plate.text in titles and all(t == "" for t in titles[1::3] + titles[2::3])
+    with pytest.raises(ValueError, match="expected"):
+        charts.write_plate_gallery({"sharp": sharp[:1]}, scenes, {}, tmp_path / "bad.png")
