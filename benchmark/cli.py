@@ -148,8 +148,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     report.write_results(out, rows, meta)
     for picture in result.pictures:
         shutil.copyfile(picture, out / picture.name)
-    if plates:
-        report.write_plate_records(out, plates)
+    write_charts(out, rows, plates, result.bound_curves)
     table = report.write_tables(out, rows)
     print((out / "table.md").read_text())
     if args.publish:
@@ -157,6 +156,21 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({len(table)} table rows, "
           f"{meta['wall_s']:.1f} s)")
     return 0
+
+
+def write_charts(out: Path, rows: list[dict], plates: list[dict], bound_curves: dict[str, tuple]) -> None:
+    """The run's charts: restorer speed vs PSNR, plate accuracy vs width (with the bound), the bound."""
+    from benchmark import report
+    from benchmark.charts.bound import write_bound_chart
+    from benchmark.charts.plates import write_plate_width_chart
+    from benchmark.charts.restorers import restorer_points, write_restorer_speed_chart
+    if restorer_points(rows):
+        write_restorer_speed_chart(rows, out / "restorers_speed_vs_psnr.png")
+    if plates:
+        report.write_plate_records(out, plates)
+        write_plate_width_chart(plates, out / "plate_accuracy_vs_width.png", ceilings=bound_curves)
+    if bound_curves:
+        write_bound_chart(bound_curves, out / "bound_ceiling_vs_width.png")
 
 
 def publish_run(rows: list[dict], profile, lens_info: dict[str, dict], out: Path) -> None:

@@ -21,7 +21,8 @@ import attacks
 import lenses
 from benchmark.cache import cache_root, config_hash
 from benchmark.metrics import finite_mean, psnr, ssim
-from benchmark.plates import PlateOutcome, score_scene, summarise
+from benchmark.charts.plates import write_plate_gallery
+from benchmark.plates import PlateOutcome, readable, score_scene, summarise
 from benchmark.profiles import Profile
 from benchmark.report import write_sample_grid
 from benchmark.scenes import CLASS_NAMES, PLATE_FORMAT, Scene, load_scenes, plate_entropy_bits
@@ -146,12 +147,13 @@ def restoration_metrics(restored: torch.Tensor, sharp: torch.Tensor) -> dict:
 
 def read_plates(reader: attacks.Reader, images: torch.Tensor, scenes: list[Scene], batch_size: int,
                 device: str, segment: Callable[[torch.Tensor], torch.Tensor] | None = None
-                ) -> tuple[list[PlateOutcome], float]:
+                ) -> tuple[list[PlateOutcome], float, list[list[attacks.PlateRead]]]:
     """Run a reader over images (batch-wise) and score it against the scenes' plates.
 
-    Returns the per-plate outcomes and the reader's images per second.
+    Returns the per-plate outcomes, the reader's images per second and the reads per image.
     """
     outcomes: list[PlateOutcome] = []
+    all_reads: list[list[attacks.PlateRead]] = []
     t0 = time.perf_counter()
     for start in range(0, images.shape[0], batch_size):
         chunk = scenes[start:start + batch_size]
@@ -160,7 +162,8 @@ def read_plates(reader: attacks.Reader, images: torch.Tensor, scenes: list[Scene
             reads = reader.read(images[start:start + batch_size].to(device), hints)
         for r, scene in zip(reads, chunk):
             outcomes.extend(score_scene(r, scene))
-    return outcomes, images.shape[0] / (time.perf_counter() - t0)
+        all_reads.extend(reads)
+    return outcomes, images.shape[0] / (time.perf_counter() - t0), all_reads
 
 
 def plate_rows(lens_name: str, attack: str, seed: int, cfg: RunConfig, outcomes: list[PlateOutcome],
@@ -218,6 +221,7 @@ def evaluate_lens(lens_name: str, lens: lenses.Lens, seed: int, cfg: RunConfig, 
         rows.append(make_row(lens_name, attacker.name, seed, cfg, metrics,
                              {**base_config, "attack": attacker.describe()}, prov))
     plates: list[dict] = []
+    pictures = []
     for reader in readers:
         reason = reader.skip_reason(ctx)
         if reason:
@@ -225,21 +229,30 @@ def evaluate_lens(lens_name: str, lens: lenses.Lens, seed: int, cfg: RunConfig, 
             continue
         reader.fit(ctx)
         sources = {reader.name: sensor, **{f"{name}>{reader.name}": out for name, out in restored.items()}}
+        source_reads = {}
         for chain, images in tqdm(sources.items(), desc=f"{lens_name} {reader.name}", leave=False):
             # The attacker with device access segments sensor images with the lens's own network,
             # restored images with the clean one.
             net = lens_net if chain == reader.name else clean_net
             segment = segmenter(net, cfg) if net is not None else None
-            outcomes, speed = read_plates(reader, images, scenes, p.batch_size, cfg.device, segment)
+            outcomes, speed, source_reads[chain] = read_plates(reader, images, scenes, p.batch_size, cfg.device,
+                                                               segment)
             row, records = plate_rows(lens_name, chain, seed, cfg, outcomes, speed, reader, base_config, prov)
             rows.append(row)
             plates.extend(records)
+        gallery = f"plates_{lens_name}_{reader.name}_seed{seed}.png".replace("/", "_")
+        images = {"sharp": sharp, "sensor": sensor, **restored}
+        reads = {"sensor": source_reads[reader.name],
+                 **{name: source_reads[f"{name}>{reader.name}"] for name in restored}}
+        if any(readable(pl) for s in scenes for pl in s.plates):
+            write_plate_gallery(images, scenes, reads, out_dir / gallery)
+            pictures.append(gallery)
     scores = {r["attack"]: f"PSNR {r['psnr_db']:.2f} dB, SSIM {r['ssim']:.3f}" for r in rows if "psnr_db" in r}
     as_hwc = lambda t: t[0].permute(1, 2, 0).clamp(0, 1).numpy()  # noqa: E731
     name = f"samples_{lens_name}_seed{seed}.png".replace("/", "_")
     write_sample_grid(out_dir / name, lens_name, lens.psf().detach().cpu().numpy(), as_hwc(sharp), as_hwc(sensor),
                       {k: as_hwc(v) for k, v in restored.items()}, scores)
-    return rows, plates, [name]
+    return rows, plates, [name, *pictures]
 
 
 def sharp_reference(seed: int, cfg: RunConfig, sharp: torch.Tensor, scenes: list[Scene],
@@ -259,7 +272,7 @@ def sharp_reference(seed: int, cfg: RunConfig, sharp: torch.Tensor, scenes: list
         if reader.skip_reason(ctx):
             continue
         reader.fit(ctx)
-        outcomes, speed = read_plates(reader, sharp, scenes, cfg.profile.batch_size, cfg.device, segment)
+        outcomes, speed, _ = read_plates(reader, sharp, scenes, cfg.profile.batch_size, cfg.device, segment)
         row, records = plate_rows("sharp", reader.name, seed, cfg, outcomes, speed, reader, config, prov)
         rows.append(row)
         plates.extend(records)
@@ -272,6 +285,7 @@ class RunOutput:
     plates: list[dict]
     pictures: list[Path]                 # sample images written by the tasks
     lens_info: dict[str, dict]           # per lens: learned coefficients and spec
+    bound_curves: dict[str, tuple]       # per lens: (plate widths px, Fano ceiling) of the first seed
 
 
 def run(cfg: RunConfig, executor: str = "local") -> RunOutput:
@@ -289,7 +303,7 @@ def run(cfg: RunConfig, executor: str = "local") -> RunOutput:
     planned = tasks.plan(cfg, restorers, readers)
     directory = tasks.run_directory(cfg)
     results = executors.get(executor).run(planned, cfg, directory)
-    out = RunOutput([], [], [], {})
+    out = RunOutput([], [], [], {}, {})
     for task in planned:
         result = results[task.key]
         out.rows.extend(result.rows)
@@ -297,6 +311,9 @@ def run(cfg: RunConfig, executor: str = "local") -> RunOutput:
         out.pictures.extend(directory / task.key / name for name in result.meta.get("pictures", []))
         if task.kind == "lens" and task.lens not in out.lens_info:
             out.lens_info[task.lens] = {k: result.meta[k] for k in ("coefficients_um", "spec")}
+        if task.kind == "bound" and task.lens not in out.bound_curves:
+            curve = result.meta["curve"]
+            out.bound_curves[task.lens] = (curve["width_px"], curve["ceiling"])
     return out
 
 

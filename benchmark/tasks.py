@@ -27,9 +27,12 @@ from benchmark.cache import config_hash
 from benchmark.plate_spectrum import cached_plate_spectrum
 from benchmark.provenance import git_commit, provenance
 from benchmark.scenes import load_scenes
+from benchmark.scenes import plate_entropy_bits
+from lenses.bound import bound_curve
 from lenses.codesign.trainer import pretrain_utility
 
 TASK_VERSION = 1
+BOUND_CURVE_WIDTHS_PX = (4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192)
 
 
 @dataclass(frozen=True)
@@ -187,8 +190,10 @@ def _bound(task: Task, cfg: R.RunConfig, _: Path) -> TaskResult:
     spectrum = cached_plate_spectrum(cfg.cache_dir, cfg.profile.bound_scenes, seed=task.seed)
     config = {**_base_config(cfg, lens, task.seed), "attack": "bound", "plate_format": cfg.plate_format,
               "frames": cfg.frames}
+    curve = bound_curve(lens, spectrum, BOUND_CURVE_WIDTHS_PX, plate_entropy_bits(cfg.plate_format))
     return TaskResult([R.make_row(task.lens, "bound", task.seed, cfg, R.bound_metrics(lens, spectrum, cfg), config,
-                                  provenance(cfg.device))])
+                                  provenance(cfg.device))],
+                      meta={"curve": {k: [float(x) for x in v] for k, v in curve.items()}})
 
 
 def _fit(task: Task, cfg: R.RunConfig, _: Path) -> TaskResult:

@@ -45,11 +45,13 @@ def width_accuracy(records: Sequence[Mapping], bins_px: Sequence[int] = WIDTH_BI
     return out
 
 
-def write_plate_width_chart(records: list[dict], path: Path, bins_px: Sequence[int] = WIDTH_BINS_PX) -> Path:
+def write_plate_width_chart(records: list[dict], path: Path, bins_px: Sequence[int] = WIDTH_BINS_PX,
+                            ceilings: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None) -> Path:
     """PNG of plate accuracy (0-1) against plate width (px, log axis), one line per (lens, chain).
 
     Each point sits at the geometric centre of its width bin (the open last bin at 1.25 x its
-    left edge); empty bins are left out. Returns ``path``.
+    left edge); empty bins are left out. ``ceilings`` (lens -> (widths px, Fano ceiling)) are drawn
+    as dashed lines: no attacker may read more than that (lenses.bound). Returns ``path``.
     """
     if not records:
         raise ValueError("no plate records to chart: pass the per-plate dicts of plates.csv")
@@ -60,6 +62,8 @@ def write_plate_width_chart(records: list[dict], path: Path, bins_px: Sequence[i
     for (lens, attack), (_, acc, counts) in curves.items():
         keep = counts > 0
         ax.plot(centres[keep], acc[keep], marker="o", label=f"{lens} / {attack} (n={int(counts.sum())})")
+    for lens, (widths, ceiling) in (ceilings or {}).items():
+        ax.plot(widths, ceiling, "--", lw=1.2, label=f"{lens}: ceiling for any attacker (bound)")
     ax.set_xscale("log")
     ax.set_xticks(edges)
     ax.set_xticklabels([str(e) for e in edges])
