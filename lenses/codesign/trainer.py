@@ -45,6 +45,58 @@ class TrainingDivergedError(RuntimeError):
     """A loss became NaN or Inf; the last good checkpoint is kept."""
 
 
+class SingleProcess:
+    """How one training step is spread over replicas: here, one process holds the whole batch.
+
+    The loop is written against this interface so that `lenses.codesign.distributed.DataParallel`
+    can split each batch over ranks; every method here is an exact identity, so single-process
+    training computes bit for bit what it did before data parallelism existed.
+    """
+
+    world = 1
+    is_writer = True         # this process writes checkpoints and publishes the artifacts
+    reduction = "mean"       # loss reduction over the local rows (see `scale`)
+
+    def rows(self, batch_size: int) -> slice:
+        """The rows of the global batch this process trains on."""
+        return slice(0, batch_size)
+
+    def scale(self, count: torch.Tensor | int) -> float | torch.Tensor:
+        """Factor turning the `reduction` of a loss over local rows into this process's estimate of
+        the global-batch mean, given `count` elements in the global batch (1 here: mean is the mean)."""
+        return 1.0
+
+    def sense(self, lens: Lens, x: torch.Tensor, rows: slice, generator: torch.Generator) -> torch.Tensor:
+        """Sensor images (b,3,h,w) of rows `rows` of the global scene batch x (B,3,h,w)."""
+        return lens(x, generator=generator)
+
+    def fitting(self, module: torch.nn.Module) -> torch.nn.Module:
+        """The module to call for the networks' own training step (gradients reach their optimiser)."""
+        return module
+
+    def mean(self, t: torch.Tensor) -> torch.Tensor:
+        """The mean over replicas of a per-replica estimate (no gradient)."""
+        return t
+
+    def item(self, t: torch.Tensor) -> float:
+        return t.item()
+
+    def gradient_penalty(self, g: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(penalty value, term to add to this replica's optics loss) for dL_deb/dtheta estimate g."""
+        penalty = (g.norm() - 1.0) ** 2
+        return penalty, penalty
+
+    def mtadam(self, params: list[torch.Tensor], lr: float) -> torch.optim.Optimizer:
+        return MTAdam(params, lr=lr)
+
+    def writer_first(self, fn: Callable[[], Any]) -> Any:
+        """fn() on the writer, then on the others (which find its result in the cache)."""
+        return fn()
+
+    def barrier(self) -> None:
+        pass
+
+
 @dataclass
 class TrainedLens:
     """A lens together with the networks trained with it."""
@@ -111,12 +163,15 @@ class CoDesign:
     """One training run: a start spec, a scheme, a profile and a seed; cached by their hash."""
 
     def __init__(self, start: LensSpec, scheme: Scheme, profile: Any, seed: int, device: str, cache_dir: Path,
-                 name: str | None = None, scene_set: str = "synthetic"):
+                 name: str | None = None, scene_set: str = "synthetic", replicas: SingleProcess | None = None):
         if scheme.optics and not start.mask.trainable:
             raise ValueError(f"scheme {scheme.name!r} trains the optics, but lens spec {start.name!r} declares no "
                              "mask.bounds_um (a trainable mask declares its bounds)")
         self.start, self.scheme, self.profile, self.seed = start, scheme, profile, seed
         self.device, self.scene_set = device, scene_set
+        # Deliberately not in the config hash: a data-parallel run is the same run (same global
+        # batches), so `lenses.load` finds it and either kind of run resumes the other's checkpoint.
+        self.replicas = replicas or SingleProcess()
         self.name = name or scheme.name
         self.config = {
             "what": "codesign", "version": TRAINER_VERSION, "scheme": dataclasses.asdict(scheme),
@@ -158,20 +213,23 @@ class CoDesign:
         `stop_after` ends the call after that many steps of this call, leaving the checkpoint
         (used by tests to simulate an interruption).
         """
-        p, scheme, dev = self.profile, self.scheme, self.device
+        p, scheme, dev, rep = self.profile, self.scheme, self.device, self.replicas
         t_start = time.perf_counter()
-        clean = pretrain_utility(p, self.seed, dev, self.cache_dir, self.scene_set, progress)
+        progress = progress and rep.is_writer
+        clean = rep.writer_first(lambda: pretrain_utility(p, self.seed, dev, self.cache_dir, self.scene_set, progress))
         torch.manual_seed(self.seed)
         lens = Lens(self.start).to(dev)
         seg = build_segformer(p.utility_model).to(dev)
         seg.load_state_dict(clean.state_dict())
         deb = RED10(p.adversary_width).to(dev) if scheme.adversary else None
+        seg_fit = rep.fitting(seg)
+        deb_fit = rep.fitting(deb) if deb is not None else None
         opt_seg = torch.optim.AdamW(seg.parameters(), lr=p.seg_lr)
         opt_deb = torch.optim.Adam(deb.parameters(), lr=p.deb_lr) if deb is not None else None
         opt_opt: torch.optim.Optimizer | None = None
         if scheme.optics:
             params = [lens.coefficients_um]
-            opt_opt = MTAdam(params, lr=p.optics_lr) if scheme.balance == "mtadam" else torch.optim.Adam(params, lr=p.optics_lr)
+            opt_opt = rep.mtadam(params, p.optics_lr) if scheme.balance == "mtadam" else torch.optim.Adam(params, lr=p.optics_lr)
         curves: dict[str, list] = {"step": [], "seg": [], "deb": [], "gp": [], "bits": [], "coefficients_um": [],
                                    "psf_radius_px": []}
         start_step = 0
@@ -189,12 +247,13 @@ class CoDesign:
                 opt_opt.load_state_dict(ckpt["opt_optics"])
             curves = ckpt["curves"]
             log.info("%s: resuming from step %d (%s)", self.name, start_step, self.checkpoint_path)
+        rep.barrier()  # every replica has read the checkpoint before the writer may replace it
         sampler = CropSampler.from_split(self.scene_set, p.n_train, p.image_size, p.train_crop, p.batch_size,
                                          self.seed)
         if scheme.balance == "info":
             from benchmark.plate_spectrum import cached_plate_spectrum
             from benchmark.scenes import plate_entropy_bits
-            self.spectrum = cached_plate_spectrum(self.cache_dir, p.bound_scenes, seed=self.seed)
+            self.spectrum = rep.writer_first(lambda: cached_plate_spectrum(self.cache_dir, p.bound_scenes, seed=self.seed))
             self.entropy_bits = plate_entropy_bits()
         every = max(1, p.codesign_steps // 10)
         seg.train()
@@ -204,7 +263,7 @@ class CoDesign:
                    initial=start_step, total=p.codesign_steps, leave=False)
         done_here = 0
         for step in bar:
-            stats = self._step(step, lens, seg, deb, opt_seg, opt_deb, opt_opt, sampler)
+            stats = self._step(step, lens, seg, deb, opt_seg, opt_deb, opt_opt, sampler, seg_fit, deb_fit)
             curves["step"].append(step)
             for key in ("seg", "deb", "gp", "bits"):
                 curves[key].append(stats.get(key, math.nan))
@@ -215,7 +274,7 @@ class CoDesign:
                 on_step(step, stats)
             done_here += 1
             last = step + 1 == p.codesign_steps
-            if (step + 1) % every == 0 or last:
+            if rep.is_writer and ((step + 1) % every == 0 or last):
                 state = {"step": step + 1, "coefficients_um": lens.coefficients_um.detach().cpu(),
                          "seg": seg.state_dict(), "opt_seg": opt_seg.state_dict(), "curves": curves}
                 if deb is not None:
@@ -228,31 +287,49 @@ class CoDesign:
         record = {"name": self.name, "scheme": self.scheme.name, "config": self.config, "curves": curves,
                   "train_s": time.perf_counter() - t_start, "seconds_per_step": None,
                   "final_coefficients_um": [float(c) for c in lens.coefficients_um.detach().cpu()],
-                  "psf_radius_px": psf_radius_px(lens.psf())}
+                  "psf_radius_px": psf_radius_px(lens.psf()), "world_size": rep.world}
         if done_here:
             record["seconds_per_step"] = (time.perf_counter() - t_start) / done_here
-        self._publish(lens, seg, deb, record)
-        self.checkpoint_path.unlink(missing_ok=True)
+        if rep.is_writer:
+            self._publish(lens, seg, deb, record)
+            self.checkpoint_path.unlink(missing_ok=True)
+        rep.barrier()  # the others load what the writer published
         trained = self.load()
         assert trained is not None
         return trained
 
     def _step(self, step: int, lens: Lens, seg: torch.nn.Module, deb: torch.nn.Module | None,
               opt_seg: torch.optim.Optimizer, opt_deb: torch.optim.Optimizer | None,
-              opt_opt: torch.optim.Optimizer | None, sampler: CropSampler) -> dict[str, float]:
-        scheme, dev = self.scheme, self.device
+              opt_opt: torch.optim.Optimizer | None, sampler: CropSampler, seg_fit: torch.nn.Module | None = None,
+              deb_fit: torch.nn.Module | None = None) -> dict[str, float]:
+        """One step on batch `step`. `seg_fit`/`deb_fit` (default: seg/deb) run the networks' own
+        training pass; the optics pass goes through the bare modules. Under data parallelism every
+        loss here is this replica's estimate of the global-batch loss (see SingleProcess.scale)."""
+        scheme, dev, rep = self.scheme, self.device, self.replicas
+        seg_fit = seg if seg_fit is None else seg_fit
+        deb_fit = deb if deb_fit is None else deb_fit
         torch.manual_seed(self.seed * 7919 + step)  # drop-path etc.: reproducible across resumes
         x, y = sampler.batch(step, dev)
-        sensor = lens(x, generator=step_generator(self.seed, step, dev))
+        rows = rep.rows(len(x))
+        sensor = rep.sense(lens, x, rows, step_generator(self.seed, step, dev))
+        w_seg, w_deb = rep.scale((y != IGNORE).sum()), rep.scale(x.numel())
+        x, y = x[rows], y[rows]
+
+        def seg_loss(net: torch.nn.Module, images: torch.Tensor) -> torch.Tensor:
+            return F.cross_entropy(segment_logits(net, images), y, ignore_index=IGNORE, reduction=rep.reduction) * w_seg
+
+        def deb_loss(net: torch.nn.Module, images: torch.Tensor) -> torch.Tensor:
+            return F.mse_loss(net(images), x, reduction=rep.reduction) * w_deb
+
         # 1) the networks, on the detached sensor image
-        loss_seg = F.cross_entropy(segment_logits(seg, sensor.detach()), y, ignore_index=IGNORE)
-        stats = {"seg": loss_seg.item()}
+        loss_seg = seg_loss(seg_fit, sensor.detach())
+        stats = {"seg": rep.item(loss_seg.detach())}
         opt_seg.zero_grad(set_to_none=True)
         loss_seg.backward()
         opt_seg.step()
         if deb is not None:
-            loss_deb = F.mse_loss(deb(sensor.detach()), x)
-            stats["deb"] = loss_deb.item()
+            loss_deb = deb_loss(deb_fit, sensor.detach())
+            stats["deb"] = rep.item(loss_deb.detach())
             opt_deb.zero_grad(set_to_none=True)  # type: ignore[union-attr]
             loss_deb.backward()
             opt_deb.step()  # type: ignore[union-attr]
@@ -260,7 +337,7 @@ class CoDesign:
         # 2) the optics, through the updated networks
         if opt_opt is not None:
             coeffs = lens.coefficients_um
-            seg_term = scheme.lambda_seg * F.cross_entropy(segment_logits(seg, sensor), y, ignore_index=IGNORE)
+            seg_term = scheme.lambda_seg * seg_loss(seg, sensor)
             if scheme.balance == "info":
                 nsr = noise_to_signal(lens, self.spectrum.mean_radiance)
                 bits = plate_bits(lens.psf(), self.spectrum, scheme.info_width_px, nsr)
@@ -271,21 +348,21 @@ class CoDesign:
             elif deb is None:
                 total = seg_term
             else:
-                deb_term = F.mse_loss(deb(sensor), x)
+                deb_term = deb_loss(deb, sensor)
                 total = seg_term - scheme.lambda_deb * deb_term
                 if scheme.balance == "gp":
                     (g,) = torch.autograd.grad(deb_term, coeffs, create_graph=True)
-                    penalty = (g.norm() - 1.0) ** 2
+                    penalty, term = rep.gradient_penalty(g)
                     stats["gp"] = penalty.item()
-                    total = total + penalty
-            self._guard(step, {"optics": total.item()})
+                    total = total + term
+            self._guard(step, {"optics": rep.item(total.detach())})
             if scheme.balance == "mtadam":
                 # MTAdam balances the terms itself: L_seg is the anchor, -lambda_deb L_deb is rescaled to it.
                 opt_opt.step([seg_term, -scheme.lambda_deb * deb_term])  # type: ignore[call-arg]
             else:
                 (grad,) = torch.autograd.grad(total, coeffs)
                 opt_opt.zero_grad(set_to_none=True)
-                coeffs.grad = grad
+                coeffs.grad = rep.mean(grad)
                 opt_opt.step()
             lens.clamp_to_bounds()
         stats["psf_radius_px"] = psf_radius_px(lens.psf())
