@@ -99,9 +99,10 @@ def execute(task: Task, cfg: R.RunConfig, directory: Path) -> TaskResult:
     done = load_result(directory, task)
     if done is not None:
         return done
+    directory.mkdir(parents=True, exist_ok=True)
+    for stale in directory.glob(f".{task.key}.staging-*"):  # left by a worker that died mid-task
+        shutil.rmtree(stale, ignore_errors=True)
     staging = directory / f".{task.key}.staging-{os.getpid()}-{time.monotonic_ns()}"
-    if staging.exists():
-        shutil.rmtree(staging)
     staging.mkdir(parents=True)
     t0 = time.perf_counter()
     result = _KINDS[task.kind](task, cfg, staging)
