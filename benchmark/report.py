@@ -75,12 +75,43 @@ def markdown_table(table: pd.DataFrame) -> str:
     return shown.to_markdown(index=False)
 
 
+# table.md is split by row kind, each with the columns that kind has.
+SECTIONS = (
+    ("Utility (segmentation of the sensor image)", lambda a: a == "utility",
+     ["miou", "mean_acc", "overall_acc", "fit_s", "images_per_s"]),
+    ("Restorers (deblurring attacks)", lambda a: a not in ("lens", "utility", "bound") and ">" not in a,
+     ["threat_model", "psnr_db", "ssim", "fit_s", "images_per_s"]),
+    ("Plate readers (on the sensor image and after each restorer)", lambda a: True,
+     ["threat_model", "plate_acc", "plate_cer", "plate_det", "n_plates", "images_per_s"]),
+    ("Attack-independent bound", lambda a: a == "bound",
+     ["bound_bits_w32_t1", "bound_ceiling_w32_t1", "bound_width_eps_t1", "fit_s"]),
+    ("Lenses", lambda a: a == "lens", ["psf_size_px", "psf_energy", "fit_s", "images_per_s"]),
+)
+
+
+def sectioned_markdown(table: pd.DataFrame) -> str:
+    parts = []
+    for title, wanted, columns in SECTIONS:
+        rows = table[table["attack"].map(wanted)]
+        if "plate" in columns[1]:
+            rows = rows[rows["plate_acc"].notna()] if "plate_acc" in rows else rows.iloc[0:0]
+        elif "psnr_db" in columns:
+            rows = rows[rows["psnr_db"].notna()] if "psnr_db" in rows else rows.iloc[0:0]
+        if rows.empty:
+            continue
+        keep = ["lens", "attack", "seeds"] + [c for c in columns if c in rows.columns]
+        keep += [f"{c}_std" for c in columns if f"{c}_std" in rows.columns]
+        parts += [f"### {title}", "", markdown_table(rows[keep].dropna(axis=1, how="all")), ""]
+    profile, scenes = table["profile"].iloc[0], table["scenes"].iloc[0]
+    return f"Profile `{profile}`, scenes `{scenes}`; mean ± std over seeds.\n\n" + "\n".join(parts)
+
+
 def write_tables(out: Path, rows: list[dict]) -> pd.DataFrame:
-    """table.csv (every row, full precision) and table.md (the seed summary, rounded)."""
+    """table.csv (every row, full precision) and table.md (the seed summary by row kind, rounded)."""
     out = Path(out)
     atomic_write_text(out / "table.csv", pd.DataFrame(rows).to_csv(index=False))
     table = summary_table(rows)
-    atomic_write_text(out / "table.md", markdown_table(table) + "\n")
+    atomic_write_text(out / "table.md", sectioned_markdown(table))
     return table
 
 
