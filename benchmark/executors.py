@@ -58,8 +58,9 @@ class RayExecutor:
         ray = self.ray
         started_here = not ray.is_initialized()
         if started_here:
+            # Passive OpenMP waits: tasks sharing cores must not burn them spinning.
             ray.init(address=self.address, include_dashboard=False, logging_level=logging.WARNING,
-                     log_to_driver=False)
+                     log_to_driver=False, runtime_env={"env_vars": {"OMP_WAIT_POLICY": "PASSIVE"}})
         try:
             remote = ray.remote(_remote_execute)
             threads = torch.get_num_threads()
@@ -67,7 +68,8 @@ class RayExecutor:
             refs: dict[str, object] = {}
             for task in tasks:
                 deps = [refs[d] for d in task.deps]  # Ray starts a task once its inputs exist
-                refs[task.key] = remote.options(num_cpus=min(task.cpus, total), num_gpus=task.gpus,
+                # Every task computes with the driver's thread count, so it asks for that many CPUs.
+                refs[task.key] = remote.options(num_cpus=min(max(task.cpus, threads), total), num_gpus=task.gpus,
                                                 max_retries=self.max_retries, retry_exceptions=False
                                                 ).remote(task, cfg, directory, threads, *deps)
             pending = list(refs.values())

@@ -179,7 +179,10 @@ def plate_bits_per_channel(psf: torch.Tensor, spectrum: PlateSpectrum, width_px:
     sigma = _content_covariance(spectrum, width_px, height)
     gram = _psf_gram(psf, width_px, height)
     eye = torch.eye(sigma.shape[-1], dtype=torch.float64)
-    logdet = torch.linalg.slogdet(eye + sigma @ gram / nsr[:, None, None])[1]
+    system = eye + sigma @ gram / nsr[:, None, None]
+    # One channel at a time: torch 2.14's batched CPU LU (MKL) fails ("Parameter 6 was incorrect on
+    # entry to DLASWP") and hangs on (3, n, n) batches with n ~ 900 and 2 threads.
+    logdet = torch.stack([torch.linalg.slogdet(system[c])[1] for c in range(system.shape[0])])
     return logdet / (2 * math.log(2))
 
 

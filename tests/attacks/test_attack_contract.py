@@ -29,7 +29,10 @@ def test_attack_contract(name, context):
     assert isinstance(attack, attacks.Attack) and attack.name == name
     assert isinstance(attack.threat_model, attacks.ThreatModel)
     assert set(attack.requires) <= {f.name for f in dataclasses.fields(attacks.FitContext)}
-    attack.fit(context)
+    reason = attack.skip_reason(context)
+    assert reason is None or (isinstance(reason, str) and reason)
+    if reason is None:
+        attack.fit(context)
     description = attack.describe()
     assert description["name"] == name
     json.dumps(description)  # provenance must be serializable
@@ -40,6 +43,8 @@ def test_restorer_contract(name, context):
     attack = attacks.load(name)
     if not isinstance(attack, attacks.Restorer):
         pytest.skip(f"{name} is not a restorer")
+    if attack.skip_reason(context):
+        pytest.skip(f"{name} does not apply to the fake lens: {attack.skip_reason(context)}")
     attack.fit(context)
     sensor = torch.rand(2, 3, 40, 56, generator=torch.Generator().manual_seed(1))
     with torch.no_grad():

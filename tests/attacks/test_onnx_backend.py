@@ -29,7 +29,7 @@ def _red10() -> RED10:
 def test_onnx_matches_torch(make):
     model = make()
     torch_engine = InferenceEngine(model, "torch")
-    onnx_engine = InferenceEngine(model, "onnx", probe_hw=(32, 32))
+    onnx_engine = InferenceEngine(model, "onnx", export_hw=(32, 32))
     assert (torch_engine.backend, onnx_engine.backend) == ("torch", "onnx")
     # A size that is not a multiple of the networks' downsampling, and a batch: dynamic axes.
     x = torch.rand(2, 3, 45, 70, generator=torch.Generator().manual_seed(1))
@@ -37,10 +37,14 @@ def test_onnx_matches_torch(make):
     assert difference <= 1e-4
 
 
-def test_auto_times_both_and_keeps_the_faster():
-    engine = InferenceEngine(_nafnet(), "auto", probe_hw=(32, 32))
+def test_auto_times_both_on_the_first_call_and_keeps_the_faster():
+    engine = InferenceEngine(_nafnet(), "auto", export_hw=(32, 32))
+    assert engine.backend == "auto"
+    x = torch.rand(2, 3, 32, 48, generator=torch.Generator().manual_seed(2))
+    first = engine(x)
     assert set(engine.timings_s) == {"torch", "onnx"}
     assert engine.backend == min(engine.timings_s, key=engine.timings_s.get)
+    assert torch.equal(engine(x), first)  # decided once: later calls take the same path
 
 
 def test_unknown_backend_is_rejected():
