@@ -183,6 +183,7 @@ def publish_run(rows: list[dict], profile, lens_info: dict[str, dict], out: Path
         if first:
             shutil.copyfile(first[0], samples / f"{name}__{profile.name}.png")
     leaderboard_report.render()
+    leaderboard_report.update_readme(leaderboard.LEADERBOARD.parent / "README.md")
     print(f"published {len(paths)} leaderboard entries; rendered {leaderboard.LEADERBOARD / 'README.md'}")
 
 
@@ -194,6 +195,8 @@ def cmd_report(args: argparse.Namespace) -> int:
                          "`python -m benchmark run --lens NAME --publish`")
     for path in leaderboard_report.render(directory):
         print(f"wrote {path}")
+    if args.dir is None and leaderboard_report.update_readme(leaderboard.LEADERBOARD.parent / "README.md"):
+        print("updated the results table of README.md")
     return 0
 
 

@@ -175,3 +175,19 @@ def render(directory: Path = LEADERBOARD) -> list[Path]:
     readme = directory / "README.md"
     atomic_write_text(readme, "\n".join(text) + "\n")
     return [readme, *written]
+
+
+README_START, README_END = "<!-- results:start -->", "<!-- results:end -->"
+
+
+def update_readme(readme: Path, directory: Path = LEADERBOARD) -> bool:
+    """Replace the rendered results table between the markers of the project README (if present)."""
+    text = readme.read_text()
+    if README_START not in text or README_END not in text:
+        return False
+    entries = load_entries(directory)
+    entries = [e for e in entries if e["lens"] != "sharp"] + [e for e in entries if e["lens"] == "sharp"]
+    head, rest = text.split(README_START, 1)
+    _, tail = rest.split(README_END, 1)
+    atomic_write_text(readme, f"{head}{README_START}\n{main_table(entries)}\n{README_END}{tail}")
+    return True
