@@ -4,7 +4,8 @@ import json
 import subprocess
 import sys
 
-TIMING = {"fit_s", "images_per_s", "wall_s", "date"}
+# Timing, and provenance that names when and at which commit rather than what was measured.
+TIMING = {"fit_s", "images_per_s", "wall_s", "date", "git_commit"}
 
 
 def run(out, cache, env_extra=None):

@@ -10,7 +10,8 @@ import pytest
 
 pytest.importorskip("ray", reason='the Ray executor is an optional extra: pip install ".[ray]"')
 
-TIMING = {"fit_s", "images_per_s", "wall_s", "date"}
+# Timing, and provenance that names when and at which commit rather than what was measured.
+TIMING = {"fit_s", "images_per_s", "wall_s", "date", "git_commit"}
 
 
 def run(out, cache, executor, lenses=("ideal", "defocus"), seeds="0,1", extra=(), env_extra=None):
