@@ -92,8 +92,11 @@ def test_segmentation_reader_uses_the_segment_hint(large_plate_scenes):
     reader = attacks.load("lpdr")
     reads = reader.read(sharp[:1], attacks.ReadHints(segment=lambda x: labels))
     assert reader.last_trace[0].vehicles  # components of the car / truck / bus labels
-    truth = {p.text for p in scenes[0].plates if p.box_xyxy[2] - p.box_xyxy[0] >= LARGE_PX}
-    assert truth & {r.text for r in reads[0]}
+    # The large plate on that vehicle is found and read to within a character (the exact-read
+    # accuracy of each detector is measured by the large-plate tests).
+    from benchmark.plates import score_scene
+    large = [o for o in score_scene(reads[0], scenes[0]) if o.width_px >= LARGE_PX]
+    assert large and all(o.detected and o.cer <= 1 / 7 + 1e-9 for o in large), large
 
 
 def test_skip_reason_and_missing_hints():
