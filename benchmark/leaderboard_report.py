@@ -70,7 +70,7 @@ def attacker_table(entries: list[dict]) -> str:
 
 
 def tradeoff_chart(entries: list[dict], path: Path, privacy: str, kind: str, xlabel: str, scale: float = 1.0) -> Path | None:
-    pts, labels, errs = [], [], []
+    pts, labels, errs, profiles = [], [], [], []
     for e in entries:
         util, worst = metric(e, "utility", "miou"), worst_case(e, privacy, kind)
         if util is None or worst is None:
@@ -78,14 +78,17 @@ def tradeoff_chart(entries: list[dict], path: Path, privacy: str, kind: str, xla
         pts.append((worst[0] * scale, util[0]))
         errs.append((worst[1] * scale, util[1]))
         labels.append(f"{e['lens']} ({e['profile']})")
+        profiles.append(e["profile"])
     if not pts:
         return None
     fig, ax = plt.subplots(figsize=(7, 5))
     for (x, y), (ex, ey), label in zip(pts, errs, labels):
         ax.errorbar(x, y, xerr=ex or None, yerr=ey or None, fmt="o", capsize=3)
         ax.annotate(label, (x, y), textcoords="offset points", xytext=(5, 4), fontsize=8)
-    front = pareto_front(pts)
-    ax.plot([pts[i][0] for i in front], [pts[i][1] for i in front], "k--", lw=1, label="Pareto front")
+    for profile in dict.fromkeys(profiles):  # a front per profile: budgets are not comparable
+        members = [i for i, p in enumerate(profiles) if p == profile]
+        front = [members[i] for i in pareto_front([pts[i] for i in members])]
+        ax.plot([pts[i][0] for i in front], [pts[i][1] for i in front], "--", lw=1, label=f"Pareto front ({profile})")
     ax.set_xlabel(xlabel + " (lower = more private)")
     ax.set_ylabel("utility mIoU (higher = more useful)")
     ax.grid(alpha=0.3)
