@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 import numpy as np
 from torch import Tensor
 
-from attacks.base import FitContext, PlateRead, ReadHints, Reader, ThreatModel
+from attacks.base import FitContext, PlateRead, ReadHints, Reader, ThreatModel, box_iou
 from attacks.plates.detect_craft import detect_craft
 from attacks.plates.detect_opencv import detect_opencv
 from attacks.plates.easyocr_models import load_easyocr
@@ -211,17 +211,9 @@ def _deduplicate(reads: list[PlateRead], max_iou: float = 0.5) -> list[PlateRead
     """Drop reads overlapping a more confident one (the same plate seen from overlapping vehicles)."""
     kept: list[PlateRead] = []
     for read in sorted(reads, key=lambda r: -r.score):
-        if all(_iou(read.box_xyxy, k.box_xyxy) <= max_iou for k in kept):
+        if all(box_iou(read.box_xyxy, k.box_xyxy) <= max_iou for k in kept):
             kept.append(read)
     return kept
-
-
-def _iou(a: tuple[float, ...], b: tuple[float, ...]) -> float:
-    ix = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
-    iy = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
-    inter = ix * iy
-    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
-    return inter / union if union > 0 else 0.0
 
 
 class LpdrCraft(LpdrOracle):

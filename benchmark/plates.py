@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from attacks import PlateRead
+from attacks.base import box_iou as iou
 from benchmark.scenes import Plate, Scene
 
 READABLE_MIN_WIDTH_PX = 16
@@ -57,12 +58,6 @@ def levenshtein(a: str, b: str) -> int:
     return prev[-1]
 
 
-def iou(a: tuple[float, ...], b: tuple[float, ...]) -> float:
-    ix = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
-    iy = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
-    inter = ix * iy
-    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
-    return inter / union if union > 0 else 0.0
 
 
 def _matches(read: PlateRead, plate: Plate) -> bool:
