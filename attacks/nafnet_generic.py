@@ -34,9 +34,8 @@ from attacks.restorer_training import (
     RestorerBudget,
     collect_pairs,
     fingerprint,
-    load_or_train,
+    fit_nafnet,
     random_crops,
-    train_restorer,
 )
 
 __all__ = ["NafnetGeneric"]
@@ -85,18 +84,12 @@ class NafnetGeneric(Restorer):
             budget = RestorerBudget.from_profile(ctx.profile)
             _, sharp = collect_pairs(ctx.train_pairs, budget.max_train_images)
             key = {"attack": self.name, "budget": budget.to_dict(), "data": fingerprint(sharp), "seed": ctx.seed}
-            with torch.random.fork_rng(devices=[]):
-                torch.manual_seed(ctx.seed)
-                model = budget.build_nafnet()
 
             def next_batch(generator: torch.Generator) -> tuple[Tensor, Tensor]:
                 (target,) = random_crops([sharp], budget.batch_size, budget.crop_px, generator)
                 return gray_world_balance(degrade(target, generator)), target
 
-            self.trained = load_or_train(
-                model, ctx.cache_dir, self.name, key,
-                lambda m: train_restorer(m, next_batch, budget.steps, ctx.device, ctx.seed),
-            )
+            model, self.trained = fit_nafnet(budget, ctx, self.name, key, next_batch)
             self.budget = budget
         self.engine = InferenceEngine(model.to(ctx.device), self.backend)
 

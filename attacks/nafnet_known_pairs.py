@@ -20,10 +20,9 @@ from attacks.restorer_training import (
     RestorerBudget,
     collect_pairs,
     fingerprint,
+    fit_nafnet,
     lens_key,
-    load_or_train,
     random_crops,
-    train_restorer,
 )
 
 __all__ = ["NafnetKnownPairs"]
@@ -58,18 +57,12 @@ class NafnetKnownPairs(Restorer):
         sensor, sharp = collect_pairs(ctx.train_pairs, budget.max_train_images)
         key = {"attack": self.name, "budget": budget.to_dict(), "lens": lens_key(ctx.lens),
                "data": fingerprint(sensor, sharp), "seed": ctx.seed}
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(ctx.seed)
-            model = budget.build_nafnet()
 
         def next_batch(generator: torch.Generator) -> tuple[Tensor, Tensor]:
             inp, target = random_crops([sensor, sharp], budget.batch_size, budget.crop_px, generator)
             return inp, target
 
-        self.trained = load_or_train(
-            model, ctx.cache_dir, self.name, key,
-            lambda m: train_restorer(m, next_batch, budget.steps, ctx.device, ctx.seed),
-        )
+        model, self.trained = fit_nafnet(budget, ctx, self.name, key, next_batch)
         self.budget = budget
         self.engine = InferenceEngine(model.to(ctx.device), self.backend)
 

@@ -218,3 +218,17 @@ def load_or_train(model: nn.Module, cache_dir: Path | None, kind: str, key: dict
         atomic_write_bytes(path, save_safetensors(state, metadata={"kind": kind, "config_hash": config_hash(key)}))
     return True
 
+
+
+def fit_nafnet(budget: RestorerBudget, ctx: Any, kind: str, key: dict[str, Any],
+               next_batch: Callable[[torch.Generator], tuple[Tensor, Tensor]]) -> tuple[NAFNet, bool]:
+    """A NAFNet of the budget's size, seeded with ``ctx.seed``, loaded from or trained into the cache.
+
+    Returns the network and whether it was trained (False: the cached weights were loaded).
+    """
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(ctx.seed)
+        model = budget.build_nafnet()
+    trained = load_or_train(model, ctx.cache_dir, kind, key,
+                            lambda m: train_restorer(m, next_batch, budget.steps, ctx.device, ctx.seed))
+    return model, trained
