@@ -16,6 +16,14 @@ from benchmark.leaderboard import LEADERBOARD, load_entries, metric, worst_case 
 _PNG_META = {"Software": None}
 
 
+def _save(fig: plt.Figure, path: Path) -> Path:
+    """Write a chart with fixed metadata (byte-identical re-renders) and free the figure."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=100, metadata=_PNG_META)
+    plt.close(fig)
+    return path
+
+
 def _pm(value: tuple[float, float] | tuple[float, float, str] | None, digits: int = 3, pct: bool = False) -> str:
     if value is None:
         return ""
@@ -93,10 +101,7 @@ def tradeoff_chart(entries: list[dict], path: Path, privacy: str, kind: str, xla
     ax.set_ylabel("utility mIoU (higher = more useful)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100, metadata=_PNG_META)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def attacker_speed_chart(entries: list[dict], path: Path) -> Path | None:
@@ -117,10 +122,7 @@ def attacker_speed_chart(entries: list[dict], path: Path) -> Path | None:
     ax.set_title("Attackers: speed against accuracy (one point per lens)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100, metadata=_PNG_META)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def profile_chart(entries: list[dict], path: Path) -> Path | None:
@@ -145,10 +147,7 @@ def profile_chart(entries: list[dict], path: Path) -> Path | None:
         ax.set_xlabel("profile (training budget)")
         ax.grid(alpha=0.3)
     axes[1].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100, metadata=_PNG_META)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def render(directory: Path = LEADERBOARD) -> list[Path]:
