@@ -19,10 +19,10 @@ from attacks import PlateRead
 from attacks.base import box_iou as iou
 from benchmark.scenes import Plate, Scene
 
-READABLE_MIN_WIDTH_PX = 16
+READABLE_MIN_WIDTH_PX = 32
 READABLE_MIN_VISIBLE = 0.99
 MATCH_IOU = 0.3
-WIDTH_BINS_PX = (16, 24, 32, 48, 64, 96, 128, 192)
+WIDTH_BINS_PX = (32, 48, 64, 96, 128, 192)
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ def magnification(crop_width_px: int, target_width_px: int = 320, max_mag: float
 
 
 def detect_craft(ocr: Any, crop_rgb: np.ndarray, target_width_px: int = 320, max_mag: float = 4.0,
-                 text_threshold: float = 0.7, low_text: float = 0.4) -> list[Box]:
+                 text_threshold: float = 0.7, low_text: float = 0.4, width_ths: float = 1.5) -> list[Box]:
     """Text boxes in one vehicle crop, by CRAFT.
 
     Args:
@@ -30,6 +30,9 @@ def detect_craft(ocr: Any, crop_rgb: np.ndarray, target_width_px: int = 320, max
         crop_rgb: (h, w, 3) uint8 RGB vehicle crop; an empty crop gives no boxes.
         target_width_px, max_mag: Magnification before detection (``magnification``).
         text_threshold, low_text: CRAFT's character and text-region score thresholds.
+        width_ths: Boxes on one line closer than this many box heights merge into one: a plate
+            is one line, and CRAFT often splits a wide proportional glyph ('T', 'W') off its
+            neighbours (EasyOCR's default, 0.5, lost the first letter of 3 of 5 large plates).
 
     Returns:
         Boxes (x0, y0, x1, y1) in crop pixels, clipped to the crop, widest first.
@@ -38,6 +41,6 @@ def detect_craft(ocr: Any, crop_rgb: np.ndarray, target_width_px: int = 320, max
     if h < 4 or w < 4:
         return []
     horizontal, _ = ocr.detect(crop_rgb, min_size=0, text_threshold=text_threshold, low_text=low_text,
-                               mag_ratio=magnification(w, target_width_px, max_mag))
+                               mag_ratio=magnification(w, target_width_px, max_mag), width_ths=width_ths)
     boxes = [(max(0, int(b[0])), max(0, int(b[2])), min(w, int(b[1])), min(h, int(b[3]))) for b in horizontal[0]]
     return sorted((b for b in boxes if b[2] > b[0] and b[3] > b[1]), key=lambda b: b[0] - b[2])

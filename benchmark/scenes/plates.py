@@ -19,7 +19,7 @@ PLATE_SIZE_M: tuple[float, float] = (0.52, 0.11)
 
 _ALPHABETS: dict[str, str] = {"L": string.ascii_uppercase, "D": string.digits}
 
-_FONT_PATH = Path(matplotlib.get_data_path()) / "fonts" / "ttf" / "DejaVuSansMono-Bold.ttf"
+_FONT_PATH = Path(matplotlib.get_data_path()) / "fonts" / "ttf" / "DejaVuSans-Bold.ttf"
 
 # Plates are drawn at this height and then downsampled, so that small plates are antialiased
 # like a real camera would see them instead of being rasterised from an illegible tiny font.
@@ -62,7 +62,8 @@ def render_plate(
 ) -> Image.Image:
     """Render a plate as an RGB PIL image of ``size_px = (width, height)`` pixels.
 
-    A light ``background`` with a dark border and black text in DejaVu Sans Mono Bold;
+    A light ``background`` with a dark border and black text in DejaVu Sans Bold
+    (proportional, unslashed zero, like the plate fonts of most countries);
     ``eu_band`` adds the blue strip on the left of EU plates.
     """
     width, height = size_px

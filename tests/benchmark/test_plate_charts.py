@@ -47,10 +47,12 @@ def test_width_chart_has_one_curve_per_chain(tmp_path, monkeypatch):
 
 
 def test_gallery_shows_every_source_and_what_was_read(tmp_path, monkeypatch):
-    scenes = load_scenes("synthetic", "val", 2, (512, 1024), 0)
+    scenes = load_scenes("synthetic", "val", 4, (512, 1024), 0)
     sharp = torch.from_numpy(np.stack([s.image for s in scenes])).permute(0, 3, 1, 2)
-    plate = next(p for p in scenes[0].plates if readable(p))
-    reads = {"sharp": [[PlateRead(plate.text, tuple(map(float, plate.box_xyxy)), 0.9)], []]}
+    index, plate = max(((i, p) for i, s in enumerate(scenes) for p in s.plates if readable(p)),
+                       key=lambda ip: ip[1].box_xyxy[2] - ip[1].box_xyxy[0])  # the gallery's first row
+    reads = {"sharp": [[PlateRead(plate.text, tuple(map(float, plate.box_xyxy)), 0.9)] if i == index else []
+                       for i in range(len(scenes))]}
     saved = []
     monkeypatch.setattr(plt, "close", lambda fig: saved.append(fig))
     images = {"sharp": sharp, "sensor": sharp * 0.5, "wiener-known-psf": sharp.flip(-1)}
