@@ -74,16 +74,41 @@ def make_entry(lens: str, rows: list[dict], profile: dict, coefficients_um: list
 
 
 def publish(rows: list[dict], profile: dict, lens_info: dict[str, dict], directory: Path = LEADERBOARD) -> list[Path]:
-    """Write one entry per lens of a run's rows (the `sharp` reference included)."""
+    """Write one entry per lens of a run's rows (the `sharp` reference included).
+
+    An existing entry of the same (lens, profile, scenes) is merged, not overwritten, when it
+    was measured on the same seeds, profile values and lens (coefficients and spec): rows of
+    attack chains this run did not measure are kept, each stamped with the provenance of the
+    run that measured it (``row["provenance"]``), so a run with fewer attackers cannot erase
+    a richer one. Otherwise the new entry replaces the old one.
+    """
     paths = []
     for lens in dict.fromkeys(r["lens"] for r in rows):
         lens_rows = [r for r in rows if r["lens"] == lens]
         info = lens_info.get(lens, {})
         entry = make_entry(lens, lens_rows, profile, info.get("coefficients_um"), info.get("spec"))
         path = directory / "entries" / entry_name(lens, entry["profile"], entry["scenes"])
+        if path.exists():
+            entry = merge_entries(json.loads(path.read_text()), entry)
         atomic_write_text(path, json.dumps(entry, indent=1, sort_keys=True) + "\n")
         paths.append(path)
     return paths
+
+
+_SAME_MEASUREMENT = ("seeds", "profile_values", "coefficients_um", "lens_spec")
+
+
+def merge_entries(old: dict, new: dict) -> dict:
+    """``new`` plus the rows of ``old`` whose attack chain ``new`` lacks, if both measured the same thing."""
+    if any(old.get(k) != new.get(k) for k in _SAME_MEASUREMENT):
+        return new
+    have = {row["attack"] for row in new["rows"]}
+    kept = [{**row, "provenance": row.get("provenance", old["provenance"])}
+            for row in old["rows"] if row["attack"] not in have]
+    if not kept:
+        return new
+    hashes = sorted(set(new["config_hashes"]) | set(old["config_hashes"]))
+    return {**new, "rows": new["rows"] + kept, "config_hashes": hashes}
 
 
 def load_entries(directory: Path = LEADERBOARD) -> list[dict]:

@@ -1,0 +1,30 @@
+"""Publishing an entry merges with the stored one instead of erasing rows it did not measure."""
+
+import json
+
+from benchmark import leaderboard
+
+PROFILE = {"name": "smoke", "n_val": 4}
+
+
+def _rows(attacks: list[str], commit: str, value: float = 1.0) -> list[dict]:
+    return [{"lens": "sharp", "attack": a, "seed": 0, "profile": "smoke", "scenes": "synthetic",
+             "config_hash": f"{a}-{commit}", "git_commit": commit, "date": "d", "psnr": value} for a in attacks]
+
+
+def test_fewer_attackers_keep_the_richer_rows_with_their_provenance(tmp_path):
+    (path,) = leaderboard.publish(_rows(["identity", "lpdr-oracle"], "aaa"), PROFILE, {}, tmp_path)
+    leaderboard.publish(_rows(["identity"], "bbb", value=2.0), PROFILE, {}, tmp_path)
+    entry = json.loads(path.read_text())
+    rows = {r["attack"]: r for r in entry["rows"]}
+    assert set(rows) == {"identity", "lpdr-oracle"}
+    assert rows["identity"]["metrics"]["psnr"]["mean"] == 2.0 and "provenance" not in rows["identity"]
+    assert rows["lpdr-oracle"]["provenance"]["git_commit"] == "aaa"
+    assert entry["provenance"]["git_commit"] == "bbb"
+    assert entry["config_hashes"] == ["identity-aaa", "identity-bbb", "lpdr-oracle-aaa"]
+
+
+def test_a_different_measurement_replaces_the_entry(tmp_path):
+    (path,) = leaderboard.publish(_rows(["identity", "lpdr-oracle"], "aaa"), PROFILE, {}, tmp_path)
+    leaderboard.publish(_rows(["identity"], "bbb"), {**PROFILE, "n_val": 8}, {}, tmp_path)
+    assert [r["attack"] for r in json.loads(path.read_text())["rows"]] == ["identity"]
