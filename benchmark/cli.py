@@ -69,6 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("list", help="list registered lenses, attackers and scene sets")
     rep = sub.add_parser("report", help="render leaderboard/README.md and charts from leaderboard/entries/")
     rep.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
+    study = sub.add_parser("study", help="measure a modelling-choice study into leaderboard/studies/ and re-render")
+    study.add_argument("name", choices=["psf-grid"], help="psf-grid: PSF support, pupil grid, oversampling vs error and time")
+    study.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
     return parser
 
 
@@ -200,11 +203,29 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_study(args: argparse.Namespace) -> int:
+    import torch
+
+    from benchmark import leaderboard, leaderboard_report
+    from benchmark.scenes.loading import load_scene
+    from benchmark.studies import psf_grid
+    directory = args.dir or leaderboard.LEADERBOARD
+    scene = load_scene("synthetic", "val", 0, (256, 512), 0)
+    image = torch.from_numpy(scene.image).permute(2, 0, 1)[None]
+    t0 = time.perf_counter()
+    path = psf_grid.run(directory / "studies" / "psf_grid.json", image)
+    print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
+    for written in leaderboard_report.render(directory):
+        print(f"wrote {written}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     args = build_parser().parse_args(argv)
     try:
-        return {"list": cmd_list, "run": cmd_run, "report": cmd_report, "train": cmd_train}[args.command](*(
+        return {"list": cmd_list, "run": cmd_run, "report": cmd_report, "train": cmd_train,
+                "study": cmd_study}[args.command](*(
             () if args.command == "list" else (args,)))
     except (ValueError, LookupError, NotImplementedError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import matplotlib
@@ -125,29 +126,49 @@ def attacker_speed_chart(entries: list[dict], path: Path) -> Path | None:
     return _save(fig, path)
 
 
+def utility_params(variant: str) -> int:
+    """Parameter count of the SegFormer variant a profile trains (built offline, random weights)."""
+    from benchmark.utility.segformer import build_segformer
+    return sum(p.numel() for p in build_segformer(variant).parameters())
+
+
 def profile_chart(entries: list[dict], path: Path) -> Path | None:
-    """Utility and worst-case PSNR of each lens per training profile (smoke vs quick vs paper)."""
+    """Utility and worst-case PSNR of each lens per training profile (smoke vs quick vs paper); the
+    x labels name each profile's utility model and its size, which grows with the budget."""
     by_lens: dict[str, dict[str, tuple]] = {}
+    models: dict[str, str] = {}
     for e in entries:
         util, worst = metric(e, "utility", "miou"), worst_case(e, "psnr_db", "restorer")
         if util and worst:
             by_lens.setdefault(e["lens"], {})[e["profile"]] = (util[0], worst[0])
+            models[e["profile"]] = e["profile_values"]["utility_model"]
     by_lens = {k: v for k, v in by_lens.items() if len(v) > 1}
     if not by_lens:
         return None
-    order = ["smoke", "quick", "paper"]
+    order = [p for p in ("smoke", "quick", "paper") if p in models]
+    ticks = [f"{p}\n{models[p]}, {utility_params(models[p]) / 1e6:.2f} M params" for p in order]
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     for lens, per in sorted(by_lens.items()):
-        profs = [p for p in order if p in per]
-        axes[0].plot(profs, [per[p][0] for p in profs], "o-", label=lens)
-        axes[1].plot(profs, [per[p][1] for p in profs], "o-", label=lens)
+        xs = [order.index(p) for p in order if p in per]
+        axes[0].plot(xs, [per[order[x]][0] for x in xs], "o-", label=lens)
+        axes[1].plot(xs, [per[order[x]][1] for x in xs], "o-", label=lens)
     axes[0].set_ylabel("mIoU")
     axes[1].set_ylabel("worst-case PSNR dB")
     for ax in axes:
-        ax.set_xlabel("profile (training budget)")
+        ax.set_xticks(range(len(order)), ticks, fontsize=8)
+        ax.set_xlabel("profile (training budget, utility model)")
         ax.grid(alpha=0.3)
     axes[1].legend(fontsize=7)
     return _save(fig, path)
+
+
+def study_charts(directory: Path, charts: Path) -> list[Path]:
+    """Charts of the modelling-choice studies found in `directory`/studies (see benchmark.studies)."""
+    path = directory / "studies" / "psf_grid.json"
+    if not path.is_file():
+        return []
+    from benchmark.charts.studies import psf_grid_figure
+    return [_save(psf_grid_figure(json.loads(path.read_text())), charts / "psf_grid.png")]
 
 
 def render(directory: Path = LEADERBOARD) -> list[Path]:
@@ -162,7 +183,7 @@ def render(directory: Path = LEADERBOARD) -> list[Path]:
                        "worst-case plate accuracy %", 100.0),
         attacker_speed_chart(entries, charts / "attackers_speed_vs_psnr.png"),
         profile_chart(entries, charts / "profiles.png"),
-    ) if p is not None]
+    ) if p is not None] + study_charts(directory, charts)
     text = ["# Leaderboard", "",
             "Rendered by `python -m benchmark report` from `leaderboard/entries/*.json` (written by "
             "`python -m benchmark run ... --publish`); never edited by hand. Mean ± standard deviation over the seeds "

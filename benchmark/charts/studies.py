@@ -1,0 +1,37 @@
+"""Charts of the modelling-choice studies (``leaderboard/studies/*.json``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+KNOB_TITLES = {"energy_fraction": "PSF support K (energy fraction held)", "pupil_samples": "pupil grid N",
+               "oversample": "pixel oversampling s"}
+
+
+def psf_grid_figure(study: dict) -> plt.Figure:
+    """One panel per knob: image PSNR against the reference model vs PSF+gradient time, one line per lens,
+    the suite's default circled."""
+    knobs = list(dict.fromkeys(r["knob"] for r in study["records"]))
+    fig, axes = plt.subplots(1, len(knobs), figsize=(5 * len(knobs), 4.2), sharey=True)
+    for ax, knob in zip(axes, knobs):
+        records = [r for r in study["records"] if r["knob"] == knob]
+        for lens in dict.fromkeys(r["lens"] for r in records):
+            pts = sorted((r for r in records if r["lens"] == lens), key=lambda r: r["value"])
+            line, = ax.plot([r["psf_grad_ms"] for r in pts], [r["image_psnr_db"] for r in pts], "o-", ms=4, label=lens)
+            for r in pts:
+                ax.annotate(f"{r['value']:g}", (r["psf_grad_ms"], r["image_psnr_db"]), textcoords="offset points",
+                            xytext=(3, 3), fontsize=7, color=line.get_color())
+                if r["default"]:
+                    ax.plot(r["psf_grad_ms"], r["image_psnr_db"], "o", ms=11, mfc="none", color=line.get_color())
+        ax.set_xscale("log")
+        ax.set_title(KNOB_TITLES.get(knob, knob), fontsize=10)
+        ax.set_xlabel("PSF + gradient ms (log; fastest of repeats)")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("scene PSNR dB vs reference optics (higher = closer)")
+    axes[-1].legend(fontsize=7, title="circled: suite default", title_fontsize=7)
+    return fig
