@@ -8,8 +8,9 @@ defaults and is scored by
   the variant embedded at the centre), averaged over the colour channels; 2 = disjoint, 0 = equal;
 - ``image_psnr_db``: PSNR of a synthetic street scene blurred by the variant against the same
   scene blurred by the reference (what the attackers and the utility net actually see);
-- ``psf_grad_ms``: fastest of ``repeats`` timings of PSF + backward through the coefficients
-  (the minimum, not the median: it is the figure least disturbed by other work on the machine).
+- ``psf_grad_ms``: fastest of ``repeats`` timings of PSF + backward through the coefficients on one
+  thread (one thread and the minimum, not the median: the figure least disturbed by other work on
+  the machine, so that the knobs compare with each other; absolute times with more threads differ).
 """
 
 from __future__ import annotations
@@ -63,11 +64,15 @@ def _psf_grad_ms(spec: LensSpec, geometry: Geometry, repeats: int) -> float:
     model = PupilModel(spec, geometry)
     coeffs = torch.tensor(spec.mask.zernike_um, dtype=torch.float32, requires_grad=True)
     weights = torch.rand(3, geometry.psf_size_px, geometry.psf_size_px, generator=torch.Generator().manual_seed(0))
-    times = []
-    for _ in range(repeats + 1):  # the first run warms the allocator up and is dropped
-        t0 = time.perf_counter()
-        (model(coeffs)[0] * weights).sum().backward()
-        times.append(time.perf_counter() - t0)
+    times, threads = [], torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        for _ in range(repeats + 1):  # the first run warms the allocator up and is dropped
+            t0 = time.perf_counter()
+            (model(coeffs)[0] * weights).sum().backward()
+            times.append(time.perf_counter() - t0)
+    finally:
+        torch.set_num_threads(threads)
     return 1e3 * min(times[1:])
 
 
@@ -133,6 +138,6 @@ def measure(scene: torch.Tensor, repeats: int = 5, specs: dict[str, LensSpec] | 
 def run(path: Path, scene: torch.Tensor, repeats: int = 5) -> Path:
     """Measure and write the study JSON (records and provenance) to ``path``."""
     body = {"study": "psf_grid", "scene_shape": list(scene.shape), "repeats": repeats,
-            "threads": torch.get_num_threads(), "records": measure(scene, repeats), "provenance": provenance("cpu")}
+            "timing_threads": 1, "records": measure(scene, repeats), "provenance": provenance("cpu")}
     atomic_write_text(path, json.dumps(body, indent=1, sort_keys=True) + "\n")
     return path
