@@ -2,24 +2,23 @@
 
 Built-in and third-party plugins register the same way: an entry point in a group such as
 ``privacy_lens_bench.attacks`` or ``privacy_lens_bench.lenses`` (ours are declared in this
-project's ``pyproject.toml``). Discovery reads installed metadata only and imports nothing, so
-a broken plugin costs nothing until it is asked for. ``lenses`` reuses ``discover``,
-``suggest`` and ``import_from_file`` for its own group; the rest of this module is the
-attacker registry built on them (``attacks.load``, ``attacks.available``, ``attacks.load_all``).
+project's ``pyproject.toml``). Discovery itself (``discover``, ``suggest``) is shared with the
+lens registry and lives in ``lenses.registry``; this module is the attacker registry built on it
+(``attacks.load``, ``attacks.available``, ``attacks.load_all``) and ``import_from_file``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import hashlib
 import importlib.util
 import logging
 import sys
-from importlib.metadata import EntryPoint, entry_points
+from importlib.metadata import EntryPoint
 from pathlib import Path
 
 from attacks.base import Attack
+from lenses.registry import DuplicateNameError, discover, similar, source_of, suggest
 
 __all__ = [
     "ATTACKS_GROUP",
@@ -32,6 +31,7 @@ __all__ = [
     "import_from_file",
     "load",
     "load_all",
+    "similar",
     "source_of",
     "suggest",
 ]
@@ -41,45 +41,11 @@ ATTACKS_GROUP = "privacy_lens_bench.attacks"
 logger = logging.getLogger(__name__)
 
 
-class DuplicatePluginError(RuntimeError):
-    """Two entry points in one group share a name, so which one a name means is ambiguous."""
+DuplicatePluginError = DuplicateNameError  # one error for every plugin group
 
 
 class UnknownPluginError(LookupError, ValueError):
     """A name is not registered in a group (or a file/attribute spec does not resolve)."""
-
-
-def source_of(ep: EntryPoint) -> str:
-    """Human-readable origin of an entry point: ``'<distribution> <version> (module:attr)'``."""
-    dist = ep.dist
-    where = f"{dist.name} {dist.version}" if dist is not None else "<unknown distribution>"
-    return f"{where} ({ep.value})"
-
-
-def discover(group: str) -> dict[str, EntryPoint]:
-    """All entry points of ``group`` from every installed distribution, by name, unloaded.
-
-    Raises:
-        DuplicatePluginError: Two distributions register the same name; the message names both.
-    """
-    found: dict[str, EntryPoint] = {}
-    for ep in entry_points(group=group):
-        if ep.name in found:
-            raise DuplicatePluginError(
-                f"{group}: name {ep.name!r} is registered twice, by {source_of(found[ep.name])} "
-                f"and by {source_of(ep)}; uninstall or rename one of them"
-            )
-        found[ep.name] = ep
-    return found
-
-
-def suggest(name: str, choices: list[str] | set[str] | dict[str, object]) -> list[str]:
-    """Up to three of ``choices`` that look like ``name``: close spellings (difflib) first,
-    then names that contain ``name`` or start with it (so "wiener" finds "wiener-known-psf")."""
-    pool = sorted(choices)
-    close = difflib.get_close_matches(name, pool, n=3, cutoff=0.6)
-    partial = [c for c in pool if c not in close and (name in c or c.startswith(name))]
-    return (close + partial)[:3]
 
 
 def import_from_file(spec: str) -> object:
@@ -221,9 +187,7 @@ def _is_file_spec(spec: str) -> bool:
 
 
 def _unknown(name: str, registered: dict[str, EntryPoint]) -> UnknownAttackError:
-    hint = suggest(name, registered)
-    did_you_mean = f" Did you mean {', '.join(map(repr, hint))}?" if hint else ""
     return UnknownAttackError(
-        f"unknown attacker {name!r}.{did_you_mean} Registered ({ATTACKS_GROUP}): "
+        f"unknown attacker {name!r}.{suggest(name, registered)} Registered ({ATTACKS_GROUP}): "
         f"{sorted(registered)}; or pass 'path/to/file.py:ClassName'."
     )

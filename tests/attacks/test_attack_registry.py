@@ -9,7 +9,7 @@ import textwrap
 import pytest
 
 import attacks
-from attacks.registry import DuplicatePluginError, UnknownPluginError, discover, suggest
+from attacks.registry import DuplicatePluginError, UnknownPluginError, discover, similar
 
 GROUP = "privacy_lens_bench.attacks"
 
@@ -107,7 +107,7 @@ def test_requested_unknown_name_raises_with_suggestions():
         attacks.load_all(["identity", "wiener"])
     with pytest.raises(LookupError, match=r"Registered .*'identity'"):
         attacks.load("identiy")
-    assert suggest("identiy", ["identity", "gray-world"]) == ["identity"]
+    assert similar("identiy", ["identity", "gray-world"]) == ["identity"]
 
 
 def test_duplicate_names_across_distributions_are_an_error(site):
