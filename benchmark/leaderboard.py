@@ -77,10 +77,11 @@ def publish(rows: list[dict], profile: dict, lens_info: dict[str, dict], directo
     """Write one entry per lens of a run's rows (the `sharp` reference included).
 
     An existing entry of the same (lens, profile, scenes) is merged, not overwritten, when it
-    was measured on the same seeds, profile values and lens (coefficients and spec): rows of
-    attack chains this run did not measure are kept, each stamped with the provenance of the
-    run that measured it (``row["provenance"]``), so a run with fewer attackers cannot erase
-    a richer one. Otherwise the new entry replaces the old one.
+    was measured with the same profile values and lens (coefficients and spec of the first
+    seed): rows of attack chains this run did not measure are kept with their own seeds, each
+    stamped with the provenance of the run that measured it (``row["provenance"]``), so a run
+    with fewer attackers (or more seeds for some of them) cannot erase a richer one; rows this
+    run measured replace the stored ones. Otherwise the new entry replaces the old one.
     """
     paths = []
     for lens in dict.fromkeys(r["lens"] for r in rows):
@@ -95,7 +96,7 @@ def publish(rows: list[dict], profile: dict, lens_info: dict[str, dict], directo
     return paths
 
 
-_SAME_MEASUREMENT = ("seeds", "profile_values", "coefficients_um", "lens_spec")
+_SAME_MEASUREMENT = ("profile_values", "coefficients_um", "lens_spec")
 
 
 def merge_entries(old: dict, new: dict) -> dict:
@@ -108,7 +109,8 @@ def merge_entries(old: dict, new: dict) -> dict:
     if not kept:
         return new
     hashes = sorted(set(new["config_hashes"]) | set(old["config_hashes"]))
-    return {**new, "rows": new["rows"] + kept, "config_hashes": hashes}
+    seeds = sorted({s for row in new["rows"] + kept for s in row["seeds"]})
+    return {**new, "rows": new["rows"] + kept, "config_hashes": hashes, "seeds": seeds}
 
 
 def load_entries(directory: Path = LEADERBOARD) -> list[dict]:

@@ -63,7 +63,7 @@ def main_table(entries: list[dict]) -> str:
 
 
 def attacker_table(entries: list[dict]) -> str:
-    head = "| lens | attack | threat model | PSNR dB | SSIM | plate acc % | plate CER | fit s | img/s |"
+    head = "| lens | attack | seeds | threat model | PSNR dB | SSIM | plate acc % | plate CER | fit s | img/s |"
     lines = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
     for e in entries:
         for row in e["rows"]:
@@ -72,7 +72,8 @@ def attacker_table(entries: list[dict]) -> str:
             m = lambda name: metric(e, row["attack"], name)  # noqa: E731
             fit, speed = m("fit_s"), m("images_per_s")
             lines.append("| " + " | ".join([
-                e["lens"], row["attack"], row.get("threat_model", ""), _pm(m("psnr_db"), 2), _pm(m("ssim")),
+                e["lens"], row["attack"], ",".join(map(str, row["seeds"])), row.get("threat_model", ""),
+                _pm(m("psnr_db"), 2), _pm(m("ssim")),
                 _pm(m("plate_acc"), 1, pct=True), _pm(m("plate_cer")), f"{fit[0]:.1f}" if fit else "",
                 f"{speed[0]:.2f}" if speed else ""]) + " |")
     return "\n".join(lines)

@@ -7,9 +7,10 @@ from benchmark import leaderboard
 PROFILE = {"name": "smoke", "n_val": 4}
 
 
-def _rows(attacks: list[str], commit: str, value: float = 1.0) -> list[dict]:
-    return [{"lens": "sharp", "attack": a, "seed": 0, "profile": "smoke", "scenes": "synthetic",
-             "config_hash": f"{a}-{commit}", "git_commit": commit, "date": "d", "psnr": value} for a in attacks]
+def _rows(attacks: list[str], commit: str, value: float = 1.0, seeds: tuple[int, ...] = (0,)) -> list[dict]:
+    return [{"lens": "sharp", "attack": a, "seed": s, "profile": "smoke", "scenes": "synthetic",
+             "config_hash": f"{a}-{commit}", "git_commit": commit, "date": "d", "psnr": value + s}
+            for a in attacks for s in seeds]
 
 
 def test_fewer_attackers_keep_the_richer_rows_with_their_provenance(tmp_path):
@@ -28,3 +29,13 @@ def test_a_different_measurement_replaces_the_entry(tmp_path):
     (path,) = leaderboard.publish(_rows(["identity", "lpdr-oracle"], "aaa"), PROFILE, {}, tmp_path)
     leaderboard.publish(_rows(["identity"], "bbb"), {**PROFILE, "n_val": 8}, {}, tmp_path)
     assert [r["attack"] for r in json.loads(path.read_text())["rows"]] == ["identity"]
+
+
+def test_more_seeds_for_some_attackers_keep_the_others_with_their_seeds(tmp_path):
+    (path,) = leaderboard.publish(_rows(["identity", "nafnet"], "aaa"), PROFILE, {}, tmp_path)
+    leaderboard.publish(_rows(["identity"], "bbb", seeds=(0, 1, 2)), PROFILE, {}, tmp_path)
+    entry = json.loads(path.read_text())
+    rows = {r["attack"]: r for r in entry["rows"]}
+    assert entry["seeds"] == [0, 1, 2]
+    assert rows["identity"]["seeds"] == [0, 1, 2] and rows["identity"]["metrics"]["psnr"]["std"] == 1.0
+    assert rows["nafnet"]["seeds"] == [0] and rows["nafnet"]["provenance"]["git_commit"] == "aaa"
