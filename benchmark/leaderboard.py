@@ -30,7 +30,10 @@ def entry_name(lens: str, profile: str, scenes: str) -> str:
 
 
 def aggregate(rows: list[dict]) -> list[dict]:
-    """Rows of one lens grouped by attack chain: metric mean, std (ddof=1; 0 for one seed) and per-seed values."""
+    """Rows of one lens grouped by attack chain: metric mean, std (ddof=1; 0 for one seed) and per-seed values.
+
+    Seeds without a value (NaN: nothing to score) are left out of the mean and the std and kept as
+    None in ``values``."""
     out = []
     df = pd.DataFrame(rows)
     for attack, group in df.groupby("attack", sort=False):
@@ -45,7 +48,8 @@ def aggregate(rows: list[dict]) -> list[dict]:
             if values.notna().sum() == 0:
                 continue
             v = values.to_numpy(dtype=float)
-            metrics[col] = {"mean": float(np.nanmean(v)), "std": float(np.nanstd(v, ddof=1)) if len(v) > 1 else 0.0,
+            valid = v[~np.isnan(v)]  # e.g. plate accuracy of a seed whose scenes hold no readable plate
+            metrics[col] = {"mean": float(valid.mean()), "std": float(valid.std(ddof=1)) if len(valid) > 1 else 0.0,
                             "values": [None if math.isnan(x) else float(x) for x in v]}
         item["metrics"] = metrics
         assumptions = group["bound_assumptions"].dropna() if "bound_assumptions" in group else []

@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from benchmark import leaderboard
 
 PROFILE = {"name": "smoke", "n_val": 4}
@@ -39,3 +41,13 @@ def test_more_seeds_for_some_attackers_keep_the_others_with_their_seeds(tmp_path
     assert entry["seeds"] == [0, 1, 2]
     assert rows["identity"]["seeds"] == [0, 1, 2] and rows["identity"]["metrics"]["psnr"]["std"] == 1.0
     assert rows["nafnet"]["seeds"] == [0] and rows["nafnet"]["provenance"]["git_commit"] == "aaa"
+
+
+def test_seeds_with_nothing_to_score_leave_mean_and_std_finite():
+    rows = [{"lens": "x", "attack": "lpdr", "seed": s, "plate_acc": v} for s, v in enumerate([0.5, float("nan"), 0.25])]
+    (row,) = leaderboard.aggregate(rows)
+    stats = row["metrics"]["plate_acc"]
+    assert stats["mean"] == 0.375 and stats["std"] == pytest.approx(0.1767767, rel=1e-6)
+    assert stats["values"] == [0.5, None, 0.25]
+    (row,) = leaderboard.aggregate(rows[:2])
+    assert row["metrics"]["plate_acc"]["std"] == 0.0
