@@ -147,13 +147,15 @@ def restoration_metrics(restored: torch.Tensor, sharp: torch.Tensor) -> dict:
 
 def read_plates(reader: attacks.Reader, images: torch.Tensor, scenes: list[Scene], batch_size: int,
                 device: str, segment: Callable[[torch.Tensor], torch.Tensor] | None = None
-                ) -> tuple[list[PlateOutcome], float, list[list[attacks.PlateRead]]]:
+                ) -> tuple[list[PlateOutcome], dict[str, float], list[list[attacks.PlateRead]]]:
     """Run a reader over images (batch-wise) and score it against the scenes' plates.
 
-    Returns the per-plate outcomes, the reader's images per second and the reads per image.
+    Returns the per-plate outcomes, the timing (``images_per_s``, and ``<stage>_s_per_image`` for
+    readers that keep ``stage_seconds``, like lpdr) and the reads per image.
     """
     outcomes: list[PlateOutcome] = []
     all_reads: list[list[attacks.PlateRead]] = []
+    stages_before = dict(getattr(reader, "stage_seconds", {}))
     t0 = time.perf_counter()
     for start in range(0, images.shape[0], batch_size):
         chunk = scenes[start:start + batch_size]
@@ -163,13 +165,16 @@ def read_plates(reader: attacks.Reader, images: torch.Tensor, scenes: list[Scene
         for r, scene in zip(reads, chunk):
             outcomes.extend(score_scene(r, scene))
         all_reads.extend(reads)
-    return outcomes, images.shape[0] / (time.perf_counter() - t0), all_reads
+    timing = {"images_per_s": images.shape[0] / (time.perf_counter() - t0)}
+    for stage, seconds in getattr(reader, "stage_seconds", {}).items():
+        timing[f"{stage}_s_per_image"] = (seconds - stages_before.get(stage, 0.0)) / images.shape[0]
+    return outcomes, timing, all_reads
 
 
 def plate_rows(lens_name: str, attack: str, seed: int, cfg: RunConfig, outcomes: list[PlateOutcome],
-               speed: float, reader: attacks.Reader, config: dict, prov: dict) -> tuple[dict, list[dict]]:
+               timing: dict[str, float], reader: attacks.Reader, config: dict, prov: dict) -> tuple[dict, list[dict]]:
     """The row of one reader chain, and its per-plate records (for charts and galleries)."""
-    metrics = {"threat_model": reader.threat_model.value, **summarise(outcomes), "images_per_s": speed}
+    metrics = {"threat_model": reader.threat_model.value, **summarise(outcomes), **timing}
     row = make_row(lens_name, attack, seed, cfg, metrics, {**config, "attack": attack, "reader": reader.describe()}, prov)
     records = [{"lens": lens_name, "attack": attack, "seed": seed, **o.__dict__} for o in outcomes]
     return row, records
@@ -235,9 +240,9 @@ def evaluate_lens(lens_name: str, lens: lenses.Lens, seed: int, cfg: RunConfig, 
             # restored images with the clean one.
             net = lens_net if chain == reader.name else clean_net
             segment = segmenter(net, cfg) if net is not None else None
-            outcomes, speed, source_reads[chain] = read_plates(reader, images, scenes, p.batch_size, cfg.device,
+            outcomes, timing, source_reads[chain] = read_plates(reader, images, scenes, p.batch_size, cfg.device,
                                                                segment)
-            row, records = plate_rows(lens_name, chain, seed, cfg, outcomes, speed, reader, base_config, prov)
+            row, records = plate_rows(lens_name, chain, seed, cfg, outcomes, timing, reader, base_config, prov)
             rows.append(row)
             plates.extend(records)
         gallery = f"plates_{lens_name}_{reader.name}_seed{seed}.png".replace("/", "_")
@@ -272,8 +277,8 @@ def sharp_reference(seed: int, cfg: RunConfig, sharp: torch.Tensor, scenes: list
         if reader.skip_reason(ctx):
             continue
         reader.fit(ctx)
-        outcomes, speed, _ = read_plates(reader, sharp, scenes, cfg.profile.batch_size, cfg.device, segment)
-        row, records = plate_rows("sharp", reader.name, seed, cfg, outcomes, speed, reader, config, prov)
+        outcomes, timing, _ = read_plates(reader, sharp, scenes, cfg.profile.batch_size, cfg.device, segment)
+        row, records = plate_rows("sharp", reader.name, seed, cfg, outcomes, timing, reader, config, prov)
         rows.append(row)
         plates.extend(records)
     return rows, plates
