@@ -70,7 +70,10 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="render leaderboard/README.md and charts from leaderboard/entries/")
     rep.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
     study = sub.add_parser("study", help="measure a modelling-choice study into leaderboard/studies/ and re-render")
-    study.add_argument("name", choices=["psf-grid"], help="psf-grid: PSF support, pupil grid, oversampling vs error and time")
+    study.add_argument("name", choices=["psf-grid", "utility-size"],
+                       help="psf-grid: PSF support, pupil grid, oversampling vs error and time; "
+                            "utility-size: SegFormer variants vs mIoU at one profile's budget")
+    study.add_argument("--profile", default="quick", choices=list(PROFILES), help="utility-size's budget (default: quick)")
     study.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
     return parser
 
@@ -207,15 +210,18 @@ def cmd_study(args: argparse.Namespace) -> int:
     import torch
 
     from benchmark import leaderboard, leaderboard_report
+    from benchmark.profiles import get_profile
     from benchmark.scenes.loading import load_scene
-    from benchmark.studies import psf_grid
-    directory = args.dir or leaderboard.LEADERBOARD
-    scene = load_scene("synthetic", "val", 0, (256, 512), 0)
-    image = torch.from_numpy(scene.image).permute(2, 0, 1)[None]
+    from benchmark.studies import psf_grid, utility_size
+    studies = (args.dir or leaderboard.LEADERBOARD) / "studies"
     t0 = time.perf_counter()
-    path = psf_grid.run(directory / "studies" / "psf_grid.json", image)
+    if args.name == "psf-grid":
+        scene = load_scene("synthetic", "val", 0, (256, 512), 0)
+        path = psf_grid.run(studies / "psf_grid.json", torch.from_numpy(scene.image).permute(2, 0, 1)[None])
+    else:
+        path = utility_size.run(studies / "utility_size.json", get_profile(args.profile))
     print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
-    for written in leaderboard_report.render(directory):
+    for written in leaderboard_report.render(args.dir or leaderboard.LEADERBOARD):
         print(f"wrote {written}")
     return 0
 

@@ -165,11 +165,13 @@ def profile_chart(entries: list[dict], path: Path) -> Path | None:
 
 def study_charts(directory: Path, charts: Path) -> list[Path]:
     """Charts of the modelling-choice studies found in `directory`/studies (see benchmark.studies)."""
-    path = directory / "studies" / "psf_grid.json"
-    if not path.is_file():
-        return []
-    from benchmark.charts.studies import psf_grid_figure
-    return [_save(psf_grid_figure(json.loads(path.read_text())), charts / "psf_grid.png")]
+    from benchmark.charts.studies import psf_grid_figure, utility_size_figure
+    written = []
+    for name, figure in (("psf_grid", psf_grid_figure), ("utility_size", utility_size_figure)):
+        path = directory / "studies" / f"{name}.json"
+        if path.is_file():
+            written.append(_save(figure(json.loads(path.read_text())), charts / f"{name}.png"))
+    return written
 
 
 def render(directory: Path = LEADERBOARD) -> list[Path]:

@@ -38,3 +38,22 @@ def psf_grid_figure(study: dict) -> plt.Figure:
     axes[0].set_ylabel("scene PSNR dB vs reference optics (higher = closer)")
     axes[-1].legend(fontsize=7, title="circled: suite default", title_fontsize=7)
     return fig
+
+
+def utility_size_figure(study: dict) -> plt.Figure:
+    """mIoU against parameters (log), one point per SegFormer variant, annotated with its speed."""
+    records = sorted(study["records"], key=lambda r: r["params"])
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    ax.plot([r["params"] / 1e6 for r in records], [r["miou"] for r in records], "o-")
+    for r in records:
+        ax.annotate(f"{r['variant']}\n{r['images_per_s']:.1f} img/s", (r["params"] / 1e6, r["miou"]),
+                    textcoords="offset points", xytext=(5, -14), fontsize=8)
+    ax.set_xscale("log")
+    ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.set_xlabel("parameters (millions, log)")
+    ax.set_ylabel("mIoU on sharp val scenes")
+    profile = study.get("profile", {})
+    ax.set_title(f"Utility model size at one budget ({profile.get('name', '?')}: "
+                 f"{profile.get('pretrain_steps', '?')} steps, seed {study.get('seed', '?')})", fontsize=10)
+    ax.grid(alpha=0.3)
+    return fig
