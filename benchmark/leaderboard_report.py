@@ -62,6 +62,53 @@ def main_table(entries: list[dict]) -> str:
     return "\n".join(lines)
 
 
+# The paper's qualitative claims, as (claim, lens a, lens b, metric, kind, expected sign of a - b).
+# kind "utility" reads the utility row, "restorer" the strongest restorer's figure.
+PAPER_FINDINGS = (
+    ("more lambda_deb costs utility", "os-d-1", "os-d-1000", "miou", "utility", +1),
+    ("more lambda_deb lowers the attacker's PSNR", "os-d-1", "os-d-1000", "psnr_db", "restorer", +1),
+    ("GP gives lambda_deb = 1000 privacy (attacker PSNR no higher)", "gp", "os-d-1000", "psnr_db", "restorer", 0),
+    ("GP keeps more utility than lambda_deb = 1000", "gp", "os-d-1000", "miou", "utility", +1),
+    ("MTAdam gives weaker privacy than lambda_deb = 1000", "os-d-mtadam", "os-d-1000", "psnr_db", "restorer", +1),
+)
+
+
+def _finding_value(entry: dict, name: str, kind: str) -> tuple[float, float] | None:
+    found = metric(entry, "utility", name) if kind == "utility" else worst_case(entry, name, kind)
+    return None if found is None else (found[0], found[1])
+
+
+def findings_table(entries: list[dict]) -> str:
+    """The paper's qualitative findings checked on the entries of each profile (computed, not typed).
+
+    A difference counts as within noise when it is smaller than the two seed spreads added (or
+    when either side has a single seed, which gives no spread: then the verdict says so).
+    "No higher" claims (sign 0) hold when a - b <= the spreads added.
+    """
+    head = "| profile | finding | a | b | a | b | a - b | verdict |"
+    lines = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
+    by_key = {(e["lens"], e["profile"]): e for e in entries}
+    for profile in dict.fromkeys(e["profile"] for e in entries):
+        for claim, a, b, name, kind, sign in PAPER_FINDINGS:
+            if (a, profile) not in by_key or (b, profile) not in by_key:
+                continue
+            va, vb = _finding_value(by_key[a, profile], name, kind), _finding_value(by_key[b, profile], name, kind)
+            if va is None or vb is None:
+                continue
+            diff, noise = va[0] - vb[0], va[1] + vb[1]
+            one_seed = len(by_key[a, profile]["seeds"]) < 2 or len(by_key[b, profile]["seeds"]) < 2
+            if sign == 0:
+                verdict = "holds" if diff <= noise else "does not hold"
+            elif abs(diff) <= noise:
+                verdict = "within seed noise"
+            else:
+                verdict = "holds" if diff * sign > 0 else "does not hold"
+            if one_seed and verdict != "within seed noise":
+                verdict += " (one seed: no spread)"
+            lines.append(f"| {profile} | {claim} | {a} | {b} | {_pm(va, 3)} | {_pm(vb, 3)} | {diff:+.3f} | {verdict} |")
+    return "\n".join(lines) if len(lines) > 2 else ""
+
+
 def attacker_table(entries: list[dict]) -> str:
     head = "| lens | attack | seeds | threat model | PSNR dB | SSIM | plate acc % | plate CER | fit s | img/s |"
     lines = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
@@ -193,6 +240,8 @@ def render(directory: Path = LEADERBOARD) -> list[Path]:
             "listed. Worst case = the strongest attacker of the suite for that lens; W_5% = the plate width below which "
             "the attack-independent bound certifies that no attacker reads more than 5 % of plates.", "",
             "## Utility against privacy", "", main_table(entries), "",
+            *(["## The paper's findings on these entries", "", findings_table(entries), ""]
+              if findings_table(entries) else []),
             "## Every attacker", "", attacker_table(entries), "", "## Charts", ""]
     text += [f"![{p.stem}](charts/{p.name})" for p in written]
     samples = sorted((directory / "samples").glob("*.png")) if (directory / "samples").is_dir() else []
