@@ -238,7 +238,9 @@ def render(directory: Path = LEADERBOARD) -> list[Path]:
             "Rendered by `python -m benchmark report` from `leaderboard/entries/*.json` (written by "
             "`python -m benchmark run ... --publish`); never edited by hand. Mean ± standard deviation over the seeds "
             "listed. Worst case = the strongest attacker of the suite for that lens; W_5% = the plate width below which "
-            "the attack-independent bound certifies that no attacker reads more than 5 % of plates.", "",
+            "the attack-independent bound certifies that no attacker reads more than 5 % of plates. Publishing merges "
+            "with a stored entry of the same lens and profile: an attacker row keeps the seeds (listed in the attacker "
+            "table) and the provenance of the run that measured it.", "",
             "## Utility against privacy", "", main_table(entries), "",
             *(["## The paper's findings on these entries", "", findings_table(entries), ""]
               if findings_table(entries) else []),
