@@ -184,13 +184,24 @@ def publish_run(rows: list[dict], profile, lens_info: dict[str, dict], out: Path
     paths = leaderboard.publish(rows, profile.to_dict(), lens_info)
     samples = leaderboard.LEADERBOARD / "samples"
     samples.mkdir(parents=True, exist_ok=True)
-    for name in lens_info:
-        first = sorted(out.glob(f"samples_{name}_seed*.png"))
-        if first:
-            shutil.copyfile(first[0], samples / f"{name}__{profile.name}.png")
+    copy_run_pictures(out, list(lens_info), profile.name, samples)
     leaderboard_report.render()
     leaderboard_report.update_readme(leaderboard.LEADERBOARD.parent / "README.md")
     print(f"published {len(paths)} leaderboard entries; rendered {leaderboard.LEADERBOARD / 'README.md'}")
+
+
+def copy_run_pictures(out: Path, lens_names: list[str], profile: str, samples: Path) -> list[Path]:
+    """Copy a published run's pictures into the leaderboard: each lens's first sample grid, and the
+    run's plate-accuracy-vs-width chart (named after the run's lenses: one chart per published run)."""
+    copied = []
+    for name in lens_names:
+        first = sorted(out.glob(f"samples_{name}_seed*.png"))
+        if first:
+            copied.append(Path(shutil.copyfile(first[0], samples / f"{name}__{profile}.png")))
+    chart = out / "plate_accuracy_vs_width.png"
+    if chart.is_file():
+        copied.append(Path(shutil.copyfile(chart, samples / f"plate_width__{profile}__{'+'.join(lens_names)}.png")))
+    return copied
 
 
 def cmd_report(args: argparse.Namespace) -> int:

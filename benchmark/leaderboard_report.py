@@ -246,7 +246,12 @@ def render(directory: Path = LEADERBOARD) -> list[Path]:
               if findings_table(entries) else []),
             "## Every attacker", "", attacker_table(entries), "", "## Charts", ""]
     text += [f"![{p.stem}](charts/{p.name})" for p in written]
-    samples = sorted((directory / "samples").glob("*.png")) if (directory / "samples").is_dir() else []
+    pictures = sorted((directory / "samples").glob("*.png")) if (directory / "samples").is_dir() else []
+    widths = [p for p in pictures if p.name.startswith("plate_width__")]
+    samples = [p for p in pictures if p not in widths]
+    if widths:
+        text += ["", "## Plate accuracy against plate width (one chart per published run)", ""]
+        text += [f"![{p.stem}](samples/{p.name})" for p in widths]
     if samples:
         text += ["", "## Sample images", ""] + [f"![{p.stem}](samples/{p.name})" for p in samples]
     readme = directory / "README.md"
