@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -154,23 +155,31 @@ def tradeoff_chart(entries: list[dict], path: Path, privacy: str, kind: str, xla
 
 
 def attacker_speed_chart(entries: list[dict], path: Path) -> Path | None:
-    series: dict[str, list[tuple[float, float]]] = {}
+    """Attackers' speed against accuracy: restorers (images/s vs PSNR) and plate readers (images/s vs
+    plate accuracy, chains included), one point per lens."""
+    panels = (("psnr_db", 1.0, "PSNR dB against the sharp scene", "Restorers"),
+              ("plate_acc", 100.0, "plate accuracy %", "Plate readers and chains"))
+    series = [{} for _ in panels]
     for e in entries:
         for row in e["rows"]:
             mt = row["metrics"]
-            if "psnr_db" in mt and "images_per_s" in mt:
-                series.setdefault(row["attack"], []).append((mt["images_per_s"]["mean"], mt["psnr_db"]["mean"]))
-    if not series:
+            for (name, scale, _, _), found in zip(panels, series):
+                if name in mt and "images_per_s" in mt:
+                    found.setdefault(row["attack"], []).append((mt["images_per_s"]["mean"], mt[name]["mean"] * scale))
+    if not any(series):
         return None
-    fig, ax = plt.subplots(figsize=(7, 5))
-    for name, pts in sorted(series.items()):
-        ax.scatter([p[0] for p in pts], [p[1] for p in pts], label=name, s=18)
-    ax.set_xscale("log")
-    ax.set_xlabel("images / s (log)")
-    ax.set_ylabel("PSNR dB against the sharp scene")
-    ax.set_title("Attackers: speed against accuracy (one point per lens)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5))
+    for ax, (_, _, ylabel, title), found in zip(axes, panels, series):
+        for name, pts in sorted(found.items()):
+            ax.scatter([p[0] for p in pts], [p[1] for p in pts], label=name, s=18)
+        ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.set_xlabel("images / s (log)")
+        ax.set_ylabel(ylabel)
+        ax.set_title(f"{title}: speed against accuracy (one point per lens)", fontsize=10)
+        ax.grid(alpha=0.3)
+        if found:
+            ax.legend(fontsize=6)
     return _save(fig, path)
 
 
