@@ -6,6 +6,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -47,36 +48,49 @@ def width_accuracy(records: Sequence[Mapping], bins_px: Sequence[int] = WIDTH_BI
 
 def write_plate_width_chart(records: list[dict], path: Path, bins_px: Sequence[int] = WIDTH_BINS_PX,
                             ceilings: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None) -> Path:
-    """PNG of plate accuracy (0-1) against plate width (px, log axis), one line per (lens, chain).
+    """PNG of plate accuracy (0-1) against plate width (px, log axis): one panel per lens (the sharp
+    reference first), one line per reader chain in it.
 
     Each point sits at the geometric centre of its width bin (the open last bin at 1.25 x its
     left edge); empty bins are left out. ``ceilings`` (lens -> (widths px, Fano ceiling)) are drawn
-    as dashed lines: no attacker may read more than that (lenses.bound). Returns ``path``.
+    dashed in their lens's panel: no attacker may read more than that (lenses.bound). Returns ``path``.
     """
     if not records:
         raise ValueError("no plate records to chart: pass the per-plate dicts of plates.csv")
     curves = width_accuracy(records, bins_px)
     edges = list(bins_px)
     centres = np.array([np.sqrt(lo * hi) for lo, hi in zip(edges[:-1], edges[1:])] + [edges[-1] * 1.25])
-    fig, ax = plt.subplots(figsize=(7.0, 4.4))
-    for (lens, attack), (_, acc, counts) in curves.items():
-        keep = counts > 0
-        ax.plot(centres[keep], acc[keep], marker="o", label=f"{lens} / {attack} (n={int(counts.sum())})")
-    for lens, (widths, ceiling) in (ceilings or {}).items():
-        ax.plot(widths, ceiling, "--", lw=1.2, label=f"{lens}: ceiling for any attacker (bound)")
-    ax.set_xscale("log")
-    ax.set_xticks(edges)
-    ax.set_xticklabels([str(e) for e in edges])
-    ax.set_xlabel("plate width (px, bin left edge)")
-    ax.set_ylabel("plate accuracy")
-    ax.set_ylim(-0.02, 1.02)
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7, loc="upper left")
-    ax.set_title("Licence-plate accuracy against plate width")
+    lenses = sorted({lens for lens, _ in curves}, key=lambda name: (name != "sharp", name))
+    ncols = min(3, len(lenses))
+    nrows = -(-len(lenses) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(5.2 * ncols, 3.6 * nrows), squeeze=False, sharey=True)
+    for ax, lens in zip(axes.flat, lenses):
+        for (name, attack), (_, acc, counts) in curves.items():
+            if name == lens:
+                keep = counts > 0
+                ax.plot(centres[keep], acc[keep], marker="o", ms=4, label=f"{attack} (n={int(counts.sum())})")
+        if ceilings and lens in ceilings:
+            widths, ceiling = ceilings[lens]
+            ax.plot(widths, ceiling, "k--", lw=1.0, label="ceiling for any attacker (bound)")
+        ax.set_xscale("log")
+        ax.set_xticks(edges)
+        ax.set_xticklabels([str(e) for e in edges])
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=6, loc="upper left")
+        ax.set_title(lens, fontsize=10)
+    for ax in axes.flat[len(lenses):]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel("plate width (px, bin left edge)")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("plate accuracy")
+    fig.suptitle("Licence-plate accuracy against plate width")
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
 

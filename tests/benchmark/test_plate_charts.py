@@ -33,15 +33,16 @@ def test_width_accuracy_bins_and_pools():
     np.testing.assert_allclose(curves[("gp", "nafnet-known-pairs>lpdr-oracle")][1], [0.0, 1.0, 0.5])
 
 
-def test_width_chart_has_one_curve_per_chain(tmp_path, monkeypatch):
+def test_width_chart_has_one_panel_per_lens_and_one_curve_per_chain(tmp_path, monkeypatch):
     saved = []
     monkeypatch.setattr(plt, "close", lambda fig: saved.append(fig))
     path = charts.write_plate_width_chart(records(), tmp_path / "plates" / "width.png")
     assert path.read_bytes()[:8] == PNG_MAGIC
-    (ax,) = saved[0].axes
-    assert len(ax.get_lines()) == 3
-    assert {t.get_text().split(" (")[0] for t in ax.get_legend().get_texts()} == {
-        "sharp / lpdr-oracle", "gp / lpdr-oracle", "gp / nafnet-known-pairs>lpdr-oracle"}
+    sharp, gp = [ax for ax in saved[0].axes if ax.get_visible()]
+    assert (sharp.get_title(), gp.get_title()) == ("sharp", "gp")
+    assert len(sharp.get_lines()) == 1 and len(gp.get_lines()) == 2
+    assert {t.get_text().split(" (")[0] for t in gp.get_legend().get_texts()} == {
+        "lpdr-oracle", "nafnet-known-pairs>lpdr-oracle"}
     with pytest.raises(ValueError, match="no plate records"):
         charts.write_plate_width_chart([], tmp_path / "empty.png")
 
