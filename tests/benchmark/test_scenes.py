@@ -114,7 +114,8 @@ def test_large_plates_show_dark_text_on_light_ground(full_scenes):
             x1, y1, x2, y2 = plate.box_xyxy
             if x2 - x1 >= 60 and plate.visible_fraction == 1.0:
                 luma = scene.image[y1:y2, x1:x2].mean(axis=2)
-                assert np.median(luma) > 0.5 and luma.min() < 0.2
+                # Bold text covers about half of a plate: its light ground is the upper quartile.
+                assert np.percentile(luma, 75) > 0.5 and luma.min() < 0.2
                 checked += 1
     assert checked >= 3
 
