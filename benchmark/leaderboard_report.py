@@ -74,15 +74,20 @@ PAPER_FINDINGS = (
 )
 
 
-def _finding_value(entry: dict, name: str, kind: str) -> tuple[float, float] | None:
-    found = metric(entry, "utility", name) if kind == "utility" else worst_case(entry, name, kind)
+def _finding_value(entry: dict, name: str, kind: str, attacks: set[str]) -> tuple[float, float] | None:
+    """The utility metric, or the strongest attacker's figure among ``attacks`` (those both lenses met)."""
+    if kind == "utility":
+        found = metric(entry, "utility", name)
+    else:
+        found = worst_case({**entry, "rows": [r for r in entry["rows"] if r["attack"] in attacks]}, name, kind)
     return None if found is None else (found[0], found[1])
 
 
 def findings_table(entries: list[dict]) -> str:
     """The paper's qualitative findings checked on the entries of each profile (computed, not typed).
 
-    A difference counts as within noise when it is smaller than the two seed spreads added (or
+    Attacker figures are the strongest attacker among those that ran on both lenses, so that a
+    richer attacker set on one side does not decide the comparison. A difference counts as within noise when it is smaller than the two seed spreads added (or
     when either side has a single seed, which gives no spread: then the verdict says so).
     "No higher" claims (sign 0) hold when a - b <= the spreads added.
     """
@@ -93,7 +98,10 @@ def findings_table(entries: list[dict]) -> str:
         for claim, a, b, name, kind, sign in PAPER_FINDINGS:
             if (a, profile) not in by_key or (b, profile) not in by_key:
                 continue
-            va, vb = _finding_value(by_key[a, profile], name, kind), _finding_value(by_key[b, profile], name, kind)
+            common = ({r["attack"] for r in by_key[a, profile]["rows"]}
+                      & {r["attack"] for r in by_key[b, profile]["rows"]})
+            va = _finding_value(by_key[a, profile], name, kind, common)
+            vb = _finding_value(by_key[b, profile], name, kind, common)
             if va is None or vb is None:
                 continue
             diff, noise = va[0] - vb[0], va[1] + vb[1]

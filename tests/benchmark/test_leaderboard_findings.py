@@ -38,3 +38,10 @@ def test_single_seeds_are_flagged_and_missing_lenses_skipped():
     assert set(verdicts) == {"GP gives lambda_deb = 1000 privacy (attacker PSNR no higher)",
                              "GP keeps more utility than lambda_deb = 1000"}
     assert findings_table([_entry("ideal", [0.3], [25.0])]) == ""
+
+
+def test_attackers_only_one_lens_met_do_not_decide():
+    strong = _entry("os-d-1000", [0.2], [22.0])
+    strong["rows"].append({"attack": "nafnet-known-pairs", "metrics": {"psnr_db": {"mean": 35.0, "std": 0.0}}})
+    verdicts = _verdicts([_entry("gp", [0.3], [21.0]), strong])
+    assert verdicts["GP gives lambda_deb = 1000 privacy (attacker PSNR no higher)"] == "holds (one seed: no spread)"
