@@ -125,7 +125,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     import lenses
     from benchmark import report, runner
     from benchmark.profiles import get_profile
+    from benchmark.provenance import git_commit
     from benchmark.scenes import load_scenes
+
+    git_commit()  # pinned now, as the code was imported: later commits do not re-stamp this run
 
     profile = get_profile(args.profile)
     known = lenses.available()

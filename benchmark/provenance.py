@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as _dt
+import functools
 import platform
 import subprocess
 from importlib.metadata import PackageNotFoundError, version
@@ -14,8 +15,13 @@ _PACKAGES = ("torch", "torchvision", "numpy", "scipy", "scikit-image", "opencv-p
              "transformers", "easyocr", "onnxruntime", "privacy-lens-bench")
 
 
+@functools.lru_cache(maxsize=1)
 def git_commit() -> str:
-    """HEAD commit of the source tree (with '-dirty' when it has uncommitted changes), or 'unknown'."""
+    """HEAD commit of the source tree (with '-dirty' when it has uncommitted changes), or 'unknown'.
+
+    Read once per process: the code a process runs is what it imported when it started, so a
+    commit made while a long run is going must not be stamped on the rest of its rows.
+    """
     here = Path(__file__).resolve().parent
     try:
         commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True,
