@@ -91,7 +91,9 @@ def publish(rows: list[dict], profile: dict, lens_info: dict[str, dict], directo
     for lens in dict.fromkeys(r["lens"] for r in rows):
         lens_rows = [r for r in rows if r["lens"] == lens]
         info = lens_info.get(lens, {})
-        entry = make_entry(lens, lens_rows, profile, info.get("coefficients_um"), info.get("spec"))
+        # Through JSON first: a stored entry has lists where a fresh one has tuples (image sizes).
+        entry = json.loads(json.dumps(make_entry(lens, lens_rows, profile, info.get("coefficients_um"),
+                                                 info.get("spec"))))
         path = directory / "entries" / entry_name(lens, entry["profile"], entry["scenes"])
         if path.exists():
             entry = merge_entries(json.loads(path.read_text()), entry)

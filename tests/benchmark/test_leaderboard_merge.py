@@ -6,7 +6,7 @@ import pytest
 
 from benchmark import leaderboard
 
-PROFILE = {"name": "smoke", "n_val": 4}
+PROFILE = {"name": "smoke", "n_val": 4, "image_size": (128, 256)}  # a tuple, as Profile.to_dict() gives
 
 
 def _rows(attacks: list[str], commit: str, value: float = 1.0, seeds: tuple[int, ...] = (0,)) -> list[dict]:
