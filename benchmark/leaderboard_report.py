@@ -12,6 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from benchmark.cache import atomic_write_text  # noqa: E402
+from benchmark.charts import save_figure  # noqa: E402
 from benchmark.leaderboard import LEADERBOARD, load_entries, metric, worst_case  # noqa: E402
 
 # Fixed metadata so that the same entries give byte-identical PNGs.
@@ -20,10 +21,7 @@ _PNG_META = {"Software": None}
 
 def _save(fig: plt.Figure, path: Path) -> Path:
     """Write a chart with fixed metadata (byte-identical re-renders) and free the figure."""
-    fig.tight_layout()
-    fig.savefig(path, dpi=100, metadata=_PNG_META)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=100, metadata=_PNG_META)
 
 
 def _pm(value: tuple[float, float] | tuple[float, float, str] | None, digits: int = 3, pct: bool = False) -> str:

@@ -14,6 +14,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from benchmark.cache import atomic_write_text  # noqa: E402
+from benchmark.charts import save_figure  # noqa: E402
 
 SCHEMA_VERSION = 1
 ID_COLUMNS = ["lens", "attack", "profile", "scenes"]
@@ -137,7 +138,4 @@ def write_sample_grid(path: Path, lens_name: str, psf: np.ndarray, scene: np.nda
         ax.imshow(np.clip(img, 0, 1), interpolation="nearest" if "PSF" in title else "antialiased")
         ax.set_title(title, fontsize=9)
     fig.suptitle(f"lens: {lens_name}", fontsize=11)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)

@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from benchmark.charts import save_figure  # noqa: E402
 from lenses.bound import ASSUMPTIONS  # noqa: E402
 
 
@@ -39,9 +40,4 @@ def write_bound_chart(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Pa
     ax.grid(True, which="both", alpha=0.3)
     fig.text(0.01, 0.005, "Under the assumptions of lenses.bound.ASSUMPTIONS; an upper bound, not a prediction.",
              fontsize=6, color="grey")
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100, metadata={"Description": ASSUMPTIONS})
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=100, metadata={"Description": ASSUMPTIONS}, layout=(0, 0.03, 1, 1))

@@ -14,6 +14,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from attacks import PlateRead  # noqa: E402
+from benchmark.charts import save_figure  # noqa: E402
 from benchmark.plates import WIDTH_BINS_PX, readable, score_scene  # noqa: E402
 from benchmark.scenes import Scene  # noqa: E402
 
@@ -87,12 +88,7 @@ def write_plate_width_chart(records: list[dict], path: Path, bins_px: Sequence[i
     for ax in axes[:, 0]:
         ax.set_ylabel("plate accuracy")
     fig.suptitle("Licence-plate accuracy against plate width")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=100)
 
 
 def write_plate_gallery(images: Mapping[str, torch.Tensor], scenes: Sequence[Scene],
@@ -146,12 +142,7 @@ def write_plate_gallery(images: Mapping[str, torch.Tensor], scenes: Sequence[Sce
             if name in texts:
                 read = texts[name].get((i, k), "")
                 ax.set_title(read or "-", fontsize=8, color="green" if read == plate.text else "red")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110)
 
 
 def _read_texts(scenes: Sequence[Scene], per_image: Sequence[Sequence[PlateRead]]) -> dict[tuple[int, int], str]:

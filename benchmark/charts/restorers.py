@@ -11,6 +11,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from benchmark.charts import save_figure  # noqa: E402
+
 __all__ = ["restorer_points", "write_restorer_speed_chart"]
 
 _MARKERS = "os^Dv<>pP*X"
@@ -77,8 +79,4 @@ def write_restorer_speed_chart(rows: list[dict], path: Path) -> Path:
     ax.set_ylabel("PSNR (dB)")
     ax.set_title("Restorers: speed against accuracy")
     ax.grid(True, which="both", alpha=0.3)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=120, layout=False)
