@@ -221,21 +221,20 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_study(args: argparse.Namespace) -> int:
-    import torch
-
     from benchmark import leaderboard, leaderboard_report
     from benchmark.profiles import get_profile
+    from benchmark.runner import to_tensor
     from benchmark.scenes.loading import load_scene
     from benchmark.studies import psf_grid, utility_size
-    studies = (args.dir or leaderboard.LEADERBOARD) / "studies"
+    directory = args.dir or leaderboard.LEADERBOARD
     t0 = time.perf_counter()
     if args.name == "psf-grid":
-        scene = load_scene("synthetic", "val", 0, (256, 512), 0)
-        path = psf_grid.run(studies / "psf_grid.json", torch.from_numpy(scene.image).permute(2, 0, 1)[None])
+        scene = to_tensor([load_scene("synthetic", "val", 0, (256, 512), 0)])
+        path = psf_grid.run(directory / "studies" / "psf_grid.json", scene)
     else:
-        path = utility_size.run(studies / "utility_size.json", get_profile(args.profile))
+        path = utility_size.run(directory / "studies" / "utility_size.json", get_profile(args.profile))
     print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
-    for written in leaderboard_report.render(args.dir or leaderboard.LEADERBOARD):
+    for written in leaderboard_report.render(directory):
         print(f"wrote {written}")
     return 0
 

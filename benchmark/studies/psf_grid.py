@@ -21,10 +21,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
 from benchmark.cache import atomic_write_text
+from benchmark.metrics import psnr
 from benchmark.provenance import provenance
 from lenses.convolve import convolve
 from lenses.optics import Geometry, PupilModel, choose_geometry, pupil_samples_for, worst_case_coefficients
@@ -87,14 +87,9 @@ def _embed(psf: torch.Tensor, size: int) -> torch.Tensor:
     return out
 
 
-def _psnr(a: torch.Tensor, b: torch.Tensor) -> float:
-    mse = float(((a - b) ** 2).mean())
-    return float("inf") if mse == 0 else 10 * np.log10(1.0 / mse)
-
-
-def variants(spec: LensSpec) -> list[tuple[str, float, LensSpec, Geometry]]:
-    """(knob, value, spec, geometry) for every variant: one knob moved from the defaults."""
-    default, _ = choose_geometry(spec)
+def variants(spec: LensSpec, default: Geometry) -> list[tuple[str, float, LensSpec, Geometry]]:
+    """(knob, value, spec, geometry) for every variant: one knob moved from ``default``, the
+    geometry the suite chooses for ``spec``."""
     out = []
     for fraction in ENERGY_FRACTIONS:
         s = _with_simulation(spec, psf_energy_fraction=fraction, max_psf_size_px=REFERENCE_MAX_PSF_PX)
@@ -111,7 +106,7 @@ def measure(scene: torch.Tensor, repeats: int = 5, specs: dict[str, LensSpec] | 
     records = []
     for name, spec in (specs or study_lenses()).items():
         default, _ = choose_geometry(spec)
-        cases = variants(spec)
+        cases = variants(spec, default)
         ref_spec = _with_simulation(spec, max_pupil_samples=4096)
         ref_k = min(int(1.5 * max(g.psf_size_px for *_, g in cases)) | 1, REFERENCE_MAX_PSF_PX)
         ref_geometry = Geometry(2 * pupil_samples_for(ref_spec, ref_k), ref_k, REFERENCE_OVERSAMPLE)
@@ -126,7 +121,7 @@ def measure(scene: torch.Tensor, repeats: int = 5, specs: dict[str, LensSpec] | 
                 "psf_size_px": geometry.psf_size_px, "pupil_samples": geometry.pupil_samples,
                 "oversample": geometry.oversample,
                 "psf_l1": float((_embed(psf, ref_k) - ref).abs().sum(dim=(1, 2)).mean()),
-                "image_psnr_db": _psnr(image, ref_image),
+                "image_psnr_db": float(psnr(image, ref_image)[0]),
                 "psf_grad_ms": _psf_grad_ms(spec_v, geometry, repeats),
                 "reference": {"psf_size_px": ref_k, "pupil_samples": ref_geometry.pupil_samples,
                               "oversample": REFERENCE_OVERSAMPLE,
