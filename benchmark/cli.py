@@ -9,6 +9,7 @@ import logging
 import os
 import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -18,12 +19,13 @@ for _var in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE", "HF_DATASETS_OFFLINE"):
 
 
 def _seeds(text: str) -> list[int]:
+    parts = [s.strip() for s in text.split(",")]
     try:
-        seeds = [int(s) for s in text.split(",") if s.strip() != ""]
+        seeds = [int(s) for s in parts]
     except ValueError:
         raise argparse.ArgumentTypeError(f"--seeds must be comma-separated integers like 0,1,2, got {text!r}") from None
-    if not seeds:
-        raise argparse.ArgumentTypeError("--seeds needs at least one integer")
+    if len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"--seeds lists a seed twice: {text!r}")
     return seeds
 
 
@@ -121,50 +123,89 @@ def cmd_list() -> int:
     return 0
 
 
+def prepare_out(path: Path | None) -> tuple[Path, bool]:
+    """The output folder (default runs/<date-time>), created and checked writable before any
+    compute; and whether it was created now (so a run that fails early can remove it again)."""
+    out = path or Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {str(out)!r} is a file; give a folder (it is created if missing)")
+    created = not out.exists()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise ValueError(f"--out {str(out)!r} is not a writable folder ({exc.strerror or exc})") from None
+    return out, created
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     import lenses
-    from benchmark import report, runner
+    from benchmark import executors, runner
     from benchmark.profiles import get_profile
     from benchmark.provenance import git_commit
-    from benchmark.scenes import load_scenes
+    from benchmark.run_config import RunConfig
+    from benchmark.scenes import PLATE_FORMAT, load_scenes, plate_entropy_bits
 
     git_commit()  # pinned now, as the code was imported: later commits do not re-stamp this run
 
+    # Every check that can fail runs before the output folder exists and before any compute.
     profile = get_profile(args.profile)
     known = lenses.available()
     for name in args.lens:  # fail before any work on a typo
         if not (name.endswith(".toml") or Path(name).is_file() or name in known):
             lenses.load(name)
     load_scenes(args.scenes, "val", 0, profile.image_size, 0)  # validates the scene set name
-    out = args.out or Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    out.mkdir(parents=True, exist_ok=True)
-    print(f"profile {profile.name}: {json.dumps(profile.to_dict())}")
-    from benchmark.scenes import PLATE_FORMAT, plate_entropy_bits
     plate_format = args.plate_format or PLATE_FORMAT
     plate_entropy_bits(plate_format)  # validates the format before any work
     if args.frames < 1:
         raise ValueError(f"--frames must be >= 1, got {args.frames}")
-    cfg = runner.RunConfig(lenses=args.lens, attacks=args.attack, scenes=args.scenes, profile=profile,
-                           seeds=args.seeds, device=args.device, plate_format=plate_format, frames=args.frames)
-
-    from benchmark import executors
     executors.get(args.executor)  # fails fast on a bad name or a missing Ray
-    t0 = time.perf_counter()
-    result = runner.run(cfg, executor=args.executor)
-    rows, plates = result.rows, result.plates
+    selection = runner.select_attackers(args.attack)
+    cfg = RunConfig(lenses=args.lens, attacks=args.attack, scenes=args.scenes, profile=profile,
+                    seeds=args.seeds, device=args.device, plate_format=plate_format, frames=args.frames)
+    out, created = prepare_out(args.out)
+    print(f"profile {profile.name}: {json.dumps(profile.to_dict())}")
+    try:
+        t0 = time.perf_counter()
+        result = runner.run(cfg, executor=args.executor, selection=selection)
+    except BaseException:
+        if created and not any(out.iterdir()):
+            out.rmdir()
+        raise
     meta = {"command": sys.argv, "profile": profile.to_dict(), "executor": args.executor,
             "wall_s": time.perf_counter() - t0}
-    report.write_results(out, rows, meta)
+    write_run_outputs(out, result, meta)
+    if args.publish:
+        publish_run(result, profile, out)
+    print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({meta['wall_s']:.1f} s)")
+    return report_failures(result.failed)
+
+
+def write_run_outputs(out: Path, result, meta: dict) -> None:
+    """results.json (schema rows + their settings), tables, pictures and charts of a run."""
+    from benchmark import report
+    from benchmark.schema import Results, ok_rows, write_results
+    write_results(out / "results.json", Results(result.rows, result.settings, meta))
     for picture in result.pictures:
         shutil.copyfile(picture, out / picture.name)
-    write_charts(out, rows, plates, result.bound_curves)
-    table = report.write_tables(out, rows)
+    flat = [r.flat() for r in ok_rows(result.rows)]
+    write_charts(out, flat, result.plates, result.bound_curves)
+    report.write_tables(out, flat)
     print((out / "table.md").read_text())
-    if args.publish:
-        publish_run(rows, profile, result.lens_info, out)
-    print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({len(table)} table rows, "
-          f"{meta['wall_s']:.1f} s)")
-    return 0
+
+
+def report_failures(failed: list) -> int:
+    """Print what failed (attacker, stage, message, where) and return the exit status: 0 when
+    nothing failed, 1 otherwise (the other rows are written all the same)."""
+    if not failed:
+        return 0
+    print(f"error: {len(failed)} row(s) failed:", file=sys.stderr)
+    for row in failed:
+        e = row.error
+        print(f"  {row.lens} / {row.attack} / seed {row.seed}: {e.attacker} failed at {e.stage}: {e.message}",
+              file=sys.stderr)
+    return 1
 
 
 def write_charts(out: Path, rows: list[dict], plates: list[dict], bound_curves: dict[str, tuple]) -> None:
@@ -182,8 +223,12 @@ def write_charts(out: Path, rows: list[dict], plates: list[dict], bound_curves: 
         write_bound_chart(bound_curves, out / "bound_ceiling_vs_width.png")
 
 
-def publish_run(rows: list[dict], profile, lens_info: dict[str, dict], out: Path) -> None:
+def publish_run(result, profile, out: Path) -> None:
     from benchmark import leaderboard, leaderboard_report
+    from benchmark.schema import ok_rows
+    # The leaderboard reads version-1 rows until it reads the schema (config_hash = settings hash).
+    rows = [{**r.flat(), "config_hash": r.settings_hash} for r in ok_rows(result.rows)]
+    lens_info = result.lens_info
     paths = leaderboard.publish(rows, profile.to_dict(), lens_info)
     samples = leaderboard.LEADERBOARD / "samples"
     samples.mkdir(parents=True, exist_ok=True)
@@ -223,7 +268,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_study(args: argparse.Namespace) -> int:
     from benchmark import leaderboard, leaderboard_report
     from benchmark.profiles import get_profile
-    from benchmark.runner import to_tensor
+    from benchmark.sensing import to_tensor
     from benchmark.scenes.loading import load_scene
     from benchmark.studies import psf_grid, utility_size
     directory = args.dir or leaderboard.LEADERBOARD
