@@ -163,6 +163,9 @@ class Attack(ABC):
     requires: ClassVar[frozenset[str]] = frozenset()
     # False: the attacker runs only when named (e.g. a much slower variant of a default one).
     run_by_default: ClassVar[bool] = True
+    # True: a reference row (kind "reference"), not an attack: it shows a condition (e.g. the
+    # uncorrected sensor image) and never counts as a lens's worst case.
+    reference: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
