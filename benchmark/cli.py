@@ -152,8 +152,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     # Every check that can fail runs before the output folder exists and before any compute.
     profile = get_profile(args.profile)
     known = lenses.available()
-    for name in args.lens:  # fail before any work on a typo
-        if not (name.endswith(".toml") or Path(name).is_file() or name in known):
+    for name in args.lens:  # fail before any work on a typo or a bad spec field
+        if name.endswith(".toml") or Path(name).is_file():
+            lenses.load_spec(name)
+        elif name not in known:
             lenses.load(name)
     load_scenes(args.scenes, "val", 0, profile.image_size, 0)  # validates the scene set name
     plate_format = args.plate_format or PLATE_FORMAT
@@ -285,12 +287,13 @@ def cmd_study(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from lenses.registry import DuplicateNameError
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     args = build_parser().parse_args(argv)
     try:
         return {"list": cmd_list, "run": cmd_run, "report": cmd_report, "train": cmd_train,
                 "study": cmd_study}[args.command](*(
             () if args.command == "list" else (args,)))
-    except (ValueError, LookupError, NotImplementedError, FileNotFoundError) as exc:
+    except (ValueError, LookupError, NotImplementedError, FileNotFoundError, DuplicateNameError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -146,19 +146,22 @@ class Attacked:
     restored: dict[str, torch.Tensor] = field(default_factory=dict)
     reads: dict[str, list[list[attacks.PlateRead]]] = field(default_factory=dict)
     described: dict[str, dict] = field(default_factory=dict)  # restorer name -> describe()
+    references: set[str] = field(default_factory=set)          # restorers marked `reference`
 
 
 def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dict[str, dict], cfg: RunConfig,
                   rows: RowBuilder, out: Attacked) -> None:
     """Restore with each restorer (fitted by its own task: `fitted[name]` = that task's meta) and score it."""
     for attacker in restorers:
+        # A reference (e.g. the uncorrected image) is reported, but never as an attack.
+        kind = "reference" if getattr(attacker, "reference", False) else "restorer"
         settings = {"restorer": attacker.describe()}
         meta = fitted.get(attacker.name, {})
         if "skipped" in meta:
             log.info("%s on %s skipped: %s", attacker.name, target.lens_name, meta["skipped"])
             continue
         if "error" in meta:
-            out.rows.append(rows.failed("restorer", attacker.name, RowError(**meta["error"]), restorer=attacker.name,
+            out.rows.append(rows.failed(kind, attacker.name, RowError(**meta["error"]), restorer=attacker.name,
                                         settings=settings))
             continue
         error = attempt(attacker.name, "fit", lambda: attacker.fit(target.ctx))  # a cache hit after the fit task
@@ -166,15 +169,16 @@ def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dic
         restored = error if isinstance(error, RowError) else attempt(
             attacker.name, "restore", lambda: restore_all(attacker, target.sensor, cfg.profile.batch_size, cfg.device))
         if isinstance(restored, RowError):
-            out.rows.append(rows.failed("restorer", attacker.name, restored, restorer=attacker.name,
-                                        settings={"restorer": attacker.describe()}))
+            out.rows.append(rows.failed(kind, attacker.name, restored, restorer=attacker.name, settings=settings))
             continue
         run_s = time.perf_counter() - t0
         out.restored[attacker.name] = restored
         out.described[attacker.name] = attacker.describe()
+        if kind == "reference":
+            out.references.add(attacker.name)
         metrics, per_image = restoration_metrics(restored, target.sharp)
         metrics.update({"fit_s": float(meta.get("fit_s", 0.0)), "images_per_s": target.sharp.shape[0] / run_s})
-        row = rows.row("restorer", metrics, attack=attacker.name, restorer=attacker.name,
+        row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
                        threat_model=attacker.threat_model.value, settings={"restorer": attacker.describe()})
         scene_intervals(row, per_image, seed=row.seed)
         out.rows.append(row)
@@ -186,7 +190,7 @@ def run_reader(target: Target, reader: attacks.Reader, cfg: RunConfig, rows: Row
                **{chain_name(name, reader.name): (name, images) for name, images in out.restored.items()}}
     fit_error = attempt(reader.name, "fit", lambda: reader.fit(target.ctx))
     for chain, (restorer, images) in sources.items():
-        kind = "reader" if restorer is None else "chain"
+        kind = "reader" if restorer is None else "reference" if restorer in out.references else "chain"
         settings = {"reader": reader.describe(), **({"restorer": out.described[restorer]} if restorer else {})}
         if isinstance(fit_error, RowError):
             out.rows.append(rows.failed(kind, chain, fit_error, restorer=restorer, reader=reader.name,
