@@ -28,8 +28,8 @@ from benchmark.report import write_sample_grid
 from benchmark.scenes import CLASS_NAMES, PLATE_FORMAT, Scene, load_scenes, plate_entropy_bits
 from lenses.bound import PlateSpectrum, bound_row
 from benchmark.utility.scoring import confusion_matrix, predict, scores, window_for
-from lenses.codesign.schemes import SCHEMES
-from lenses.codesign.trainer import CoDesign
+from benchmark.codesign.schemes import SCHEMES
+from benchmark.codesign.trainer import CoDesign
 
 log = logging.getLogger(__name__)
 

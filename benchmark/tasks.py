@@ -29,7 +29,7 @@ from benchmark.provenance import git_commit, provenance
 from benchmark.scenes import load_scenes
 from benchmark.scenes import plate_entropy_bits
 from lenses.bound import bound_curve
-from lenses.codesign.trainer import pretrain_utility
+from benchmark.codesign.trainer import pretrain_utility
 
 TASK_VERSION = 1
 BOUND_CURVE_WIDTHS_PX = (4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192)

@@ -20,7 +20,7 @@ from benchmark.profiles import Profile
 from benchmark.provenance import provenance
 from benchmark.runner import RunConfig, to_tensor, utility_metrics
 from benchmark.scenes import load_scenes
-from lenses.codesign.trainer import pretrain_utility
+from benchmark.codesign.trainer import pretrain_utility
 
 VARIANTS = ("tiny", "b0-narrow", "b0")
 

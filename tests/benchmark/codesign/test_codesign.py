@@ -7,10 +7,10 @@ import torch
 
 import lenses
 from benchmark.profiles import PROFILES
-from lenses.codesign.builtin import START_SPEC
-from lenses.codesign.data import CropSampler
-from lenses.codesign.schemes import SCHEMES
-from lenses.codesign.trainer import CoDesign, TrainingDivergedError
+from benchmark.codesign.builtin import START_SPEC, attach
+from benchmark.codesign.data import CropSampler
+from benchmark.codesign.schemes import SCHEMES
+from benchmark.codesign.trainer import CoDesign, TrainingDivergedError
 from lenses.spec import load_spec
 
 TINY = dataclasses.replace(PROFILES["smoke"], image_size=(64, 128), n_train=2, train_crop=(48, 48), batch_size=2,
@@ -31,7 +31,7 @@ def test_one_step_of_each_scheme_moves_the_optics(scheme, tmp_path):
     assert float((moved - start).abs().max()) > 1e-4
     assert trained.lens.spec.mask.bounds_um == load_spec(START_SPEC).mask.bounds_um
     if scheme == "gp":
-        assert torch.isfinite(torch.tensor(seen["gp"]))
+        assert torch.isfinite(torch.tensor(seen["penalty"]))
     assert (trained.adversary is None) == (scheme in ("os", "os-info"))
 
 
@@ -102,3 +102,14 @@ def test_fixed_scheme_needs_no_bounds_and_optics_schemes_do(tmp_path):
     assert fixed.load_or_train(progress=False).adversary is None
     with pytest.raises(ValueError, match="declares no mask.bounds_um"):
         CoDesign(lenses.load("defocus").spec, SCHEMES["gp"], TINY, 0, "cpu", tmp_path)
+
+
+def test_eval_keeps_the_training_record(tmp_path):
+    trained = run("os", tmp_path, dataclasses.replace(TINY, codesign_steps=1)).train(progress=False)
+    lens = attach(trained)
+    assert lens.training_record is trained.record
+    lens.eval()
+    assert lens.training is False, "torch's train/eval flag is its own attribute"
+    assert lens.training_record is trained.record
+    lens.train()
+    assert lens.training is True and lens.training_record["scheme"] == "os"
