@@ -61,5 +61,9 @@ def gp(**kw: Any) -> Lens:
     return codesigned("gp", **kw)
 
 
+def gp_literal(**kw: Any) -> Lens:
+    return codesigned("gp-literal", **kw)
+
+
 def os_info(**kw: Any) -> Lens:
     return codesigned("os-info", **kw)

@@ -19,7 +19,7 @@ single-process step on the same global batch, up to float reduction order:
   differentiable all-reduce of sums and sums of squares), so its running statistics agree too.
 - Optics: every term's coefficient gradient is averaged over ranks (`mean`), so Adam steps on
   the global gradient and MTAdam balances the global terms. The gradient penalty is the global
-  batch's: G = dL_deb/dtheta is averaged over ranks first, P = (||G|| - 1)^2, and each rank adds g_r . v (v = dP/dG, g_r its
+  batch's: G = dL_deb/dtheta is averaged over ranks first, P = (||G|| / r - 1)^2 (r the reference norm, global), and each rank adds g_r . v (v = dP/dG, g_r its
   own estimate of G, still differentiable), whose gradient averaged over ranks is exactly dP/dtheta.
   Every rank then applies the same update to the same all-reduced gradient, so the coefficients
   stay bitwise identical without a broadcast.
@@ -237,9 +237,9 @@ class DataParallel(SingleProcess):
     def item(self, t: torch.Tensor) -> float:
         return float(self.mean(t))
 
-    def gradient_penalty(self, g: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def gradient_penalty(self, g: torch.Tensor, reference: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         mean = self.mean(g).requires_grad_()
-        penalty = (mean.norm() - 1.0) ** 2
+        penalty = (mean.norm() / reference - 1.0) ** 2
         (v,) = torch.autograd.grad(penalty, mean)
         return penalty.detach(), (g * v).sum()
 

@@ -49,10 +49,11 @@ class SingleProcess:
     def item(self, t: torch.Tensor) -> float:
         return t.item()
 
-    def gradient_penalty(self, g: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def gradient_penalty(self, g: torch.Tensor, reference: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(penalty value, term whose gradient, averaged over replicas, is the penalty's) for this
-        replica's estimate g of dL_deb/dtheta: here the penalty (||g|| - 1)^2 itself."""
-        penalty = (g.norm() - 1.0) ** 2
+        replica's estimate g of dL_deb/dtheta and a detached reference norm (the same on every
+        replica): here the penalty (||g|| / reference - 1)^2 itself."""
+        penalty = (g.norm() / reference - 1.0) ** 2
         return penalty.detach(), penalty
 
     def writer_first(self, fn: Callable[[], Any]) -> Any:

@@ -1,11 +1,15 @@
 """The co-design training loop (paper Fig. 2), with caching, resume and a NaN guard.
 
+Start: the mask from a small seeded random draw (`coefficients`), the utility net from the clean
+net trained on sharp scenes (shared by all lenses, fine-tuned per lens, as the paper fine-tunes
+SegFormer), the RED10 adversary pre-trained on the starting lens until it beats the
+white-balanced sensor image (`adversary`).
+
 Per step: scene crops -> lens -> sensor image; one step of the segmentation net (cross-entropy,
-AdamW) and of the RED10 adversary (MSE, Adam) on the detached sensor image; then a second pass
+AdamW) and of the adversary (MSE, Adam) on the detached sensor image; then a second pass
 through the updated networks steps the optics with the scheme's balancing method
-(`benchmark.codesign.balancing`) and projects the coefficients back inside the bounds of the
-spec. A clean pre-training of the utility net on sharp scenes is shared by all lenses and
-fine-tuned per lens, as the paper fine-tunes SegFormer.
+(`balancing`) and projects the coefficients back inside the bounds of the spec. Every step's
+numbers go to the run's curves (`curves`: JSON lines, TensorBoard events, a chart).
 
 `CoDesign.train` reads as its four parts: `_setup` (lens, networks, optimisers), `_restore` /
 `_save_checkpoint` (resume after an interruption), `_loop` (the steps) and `_finish` (record and
@@ -28,11 +32,13 @@ import torch
 import torch.nn.functional as F
 from tqdm.auto import tqdm
 
-from attacks.networks.red10 import RED10
 from benchmark.cache import config_hash
+from benchmark.codesign.adversary import MARGIN_DB, Probe, build_adversary, pretrain_adversary
 from benchmark.codesign.artifacts import (load_checkpoint, load_weights, publish_directory, save_checkpoint,
                                           save_weights, write_json)
 from benchmark.codesign.balancing import Balance, OpticsContext, settings
+from benchmark.codesign.coefficients import INITIAL_AMPLITUDE_UM, NOLL_NAMES, bound_limited, initial_coefficients
+from benchmark.codesign.curves import CurveLog
 from benchmark.codesign.data import CropSampler, step_generator
 from benchmark.codesign.replicas import SingleProcess
 from benchmark.codesign.schemes import Scheme
@@ -46,7 +52,7 @@ log = logging.getLogger(__name__)
 
 IGNORE = 255
 # Bumped whenever the loop changes what it computes, so stale cache entries are not reused.
-TRAINER_VERSION = 2
+TRAINER_VERSION = 3
 
 
 class TrainingDivergedError(RuntimeError):
@@ -125,6 +131,9 @@ class CoDesign:
                              "mask.bounds_um (a trainable mask declares its bounds)")
         self.start, self.scheme, self.profile, self.seed = start, scheme, profile, seed
         self.device, self.scene_set = device, scene_set
+        # A trained mask starts from a seeded small draw; a fixed lens (scheme `fixed`) stays as it is.
+        self.initial_um = initial_coefficients(start, seed) if scheme.optics else start.mask.zernike_um
+        self.start_spec = dataclasses.replace(start, mask=dataclasses.replace(start.mask, zernike_um=self.initial_um))
         # Deliberately not in the config hash: a data-parallel run is the same run (same global
         # batches), so `lenses.load` finds it and either kind of run resumes the other's checkpoint.
         self.replicas = replicas or SingleProcess()
@@ -134,6 +143,8 @@ class CoDesign:
             "scheme": {"name": scheme.name, "optics": scheme.optics, "adversary": scheme.adversary,
                        "balance": settings(scheme.balance)},
             "start": start.to_dict(), "seed": seed, "scenes": scene_set,
+            "initial_amplitude_um": INITIAL_AMPLITUDE_UM if scheme.optics else 0.0,
+            "adversary": {"net": "RED10 skips residual", "margin_db": MARGIN_DB} if scheme.adversary else None,
             **_profile_fields(profile, _DATA_FIELDS + ("utility_model", "adversary_width", "pretrain_steps",
                                                        "codesign_steps", "optics_lr", "seg_lr", "deb_lr")
                               + scheme.balance.profile_fields),
@@ -141,6 +152,7 @@ class CoDesign:
         root = Path(cache_dir) / "codesign"
         self.directory = root / f"{self.name}-{config_hash(self.config)}"
         self.checkpoint_path = root / f"{self.directory.name}.checkpoint.pt"
+        self.live_dir = root / f"{self.directory.name}.live"  # curves while training (see `curves`)
         self.cache_dir = Path(cache_dir)
 
     # ---- loading -------------------------------------------------------------------------------
@@ -154,7 +166,8 @@ class CoDesign:
         utility = load_weights(d / "utility.safetensors", build_segformer(self.profile.utility_model)).to(self.device)
         adversary = None
         if (d / "adversary.safetensors").is_file():
-            adversary = load_weights(d / "adversary.safetensors", RED10(self.profile.adversary_width)).to(self.device)
+            adversary = load_weights(d / "adversary.safetensors", build_adversary(self.profile.adversary_width))
+            adversary = adversary.to(self.device)
             adversary.eval()
         utility.eval()
         return TrainedLens(lens, utility, adversary, record, d)
@@ -186,11 +199,16 @@ class CoDesign:
         """The starting lens, the networks (utility net from the clean one), their optimisers."""
         p, dev, rep = self.profile, self.device, self.replicas
         clean = rep.writer_first(lambda: pretrain_utility(p, self.seed, dev, self.cache_dir, self.scene_set, progress))
+        sampler = CropSampler.from_split(self.scene_set, p.n_train, p.image_size, p.train_crop, p.batch_size, self.seed)
         torch.manual_seed(self.seed)
-        lens = Lens(self.start).to(dev)
+        lens = Lens(self.start_spec).to(dev)
         seg = build_segformer(p.utility_model).to(dev)
         seg.load_state_dict(clean.state_dict())
-        deb = RED10(p.adversary_width).to(dev) if self.scheme.adversary else None
+        deb, pretraining = None, None
+        if self.scheme.adversary:
+            deb, pretraining = rep.writer_first(lambda: pretrain_adversary(
+                lens, sampler, p, self.seed, dev, self.cache_dir, self.scene_set, progress))
+            deb = deb.to(dev)
         # A copy: `prepare` may load this run's data into it (the scheme's own stays a setting).
         balance = copy.copy(self.scheme.balance)
         opt_optics = None
@@ -201,9 +219,7 @@ class CoDesign:
                       deb_fit=rep.fitting(deb) if deb is not None else None,
                       opt_seg=torch.optim.AdamW(seg.parameters(), lr=p.seg_lr),
                       opt_deb=torch.optim.Adam(deb.parameters(), lr=p.deb_lr) if deb is not None else None,
-                      opt_optics=opt_optics, balance=balance,
-                      sampler=CropSampler.from_split(self.scene_set, p.n_train, p.image_size, p.train_crop,
-                                                     p.batch_size, self.seed))
+                      opt_optics=opt_optics, balance=balance, sampler=sampler, pretraining=pretraining)
 
     def _restore(self, state: _State) -> None:
         """Continue from the checkpoint of an interrupted run, if there is one."""
@@ -239,21 +255,27 @@ class CoDesign:
             state.deb.train()
         bar = tqdm(range(state.step, p.codesign_steps), desc=f"co-design {self.name}", disable=not progress,
                    initial=state.step, total=p.codesign_steps, leave=False)
+        state.log = CurveLog(self.live_dir, state.curves, enabled=rep.is_writer)
         done = 0
-        for step in bar:
-            stats = self._step(step, state)
-            state.curves.append({"step": step, **stats,
-                                 "coefficients_um": [float(c) for c in state.lens.coefficients_um.detach().cpu()]})
-            state.step = step + 1
-            bar.set_postfix({k: f"{stats[k]:.3g}" for k in ("seg", "deb", "penalty", "bits") if k in stats})
-            if on_step is not None:
-                on_step(step, stats)
-            done += 1
-            last = state.step == p.codesign_steps
-            if rep.is_writer and (state.step % every == 0 or last):
-                self._save_checkpoint(state)
-            if stop_after is not None and done >= stop_after and not last:
-                raise KeyboardInterrupt(f"stopped after {done} steps (checkpoint kept)")
+        try:
+            for step in bar:
+                stats = self._step(step, state)
+                entry = {"step": step, **stats,
+                         "coefficients_um": [float(c) for c in state.lens.coefficients_um.detach().cpu()]}
+                state.curves.append(entry)
+                state.log.write(entry)
+                state.step = step + 1
+                bar.set_postfix({k: f"{stats[k]:.3g}" for k in ("seg", "deb", "penalty", "bits") if k in stats})
+                if on_step is not None:
+                    on_step(step, stats)
+                done += 1
+                last = state.step == p.codesign_steps
+                if rep.is_writer and (state.step % every == 0 or last):
+                    self._save_checkpoint(state)
+                if stop_after is not None and done >= stop_after and not last:
+                    raise KeyboardInterrupt(f"stopped after {done} steps (checkpoint kept)")
+        finally:
+            state.log.close()
         return done
 
     def _step(self, step: int, state: _State) -> dict[str, float]:
@@ -310,26 +332,43 @@ class CoDesign:
 
     def _finish(self, state: _State, seconds: float, done: int) -> None:
         """The training record; the writer publishes the artifacts and drops the checkpoint."""
-        lens = state.lens
-        record = {"name": self.name, "scheme": self.scheme.name, "config": self.config,
-                  "curves": _columns(state.curves), "train_s": seconds,
-                  "seconds_per_step": seconds / done if done else None,
-                  "final_coefficients_um": [float(c) for c in lens.coefficients_um.detach().cpu()],
-                  "psf_radius_px": psf_radius_px(lens.psf()), "world_size": self.replicas.world}
+        lens, mask = state.lens, self.start_spec.mask
+        final = [float(c) for c in lens.coefficients_um.detach().cpu()]
+        record: dict[str, Any] = {
+            "name": self.name, "scheme": self.scheme.name, "config": self.config, "curves": _columns(state.curves),
+            "train_s": seconds, "seconds_per_step": seconds / done if done else None,
+            "initial_coefficients_um": list(self.initial_um), "final_coefficients_um": final,
+            "psf_radius_px": psf_radius_px(lens.psf()), "world_size": self.replicas.world}
+        if mask.bounds_um is not None:
+            limited = bound_limited(final, mask.bounds_um)
+            record.update(bounds_um=[list(b) for b in mask.bounds_um], max_sag_um=mask.max_sag_um,
+                          bound_limited=bool(limited), bound_limited_terms=[NOLL_NAMES[j - 1] for j in limited])
+        if state.deb is not None:
+            assert state.pretraining is not None
+            record["adversary"] = {"pretraining": state.pretraining,
+                                   "start": {k: v for k, v in state.pretraining["curve"][-1].items() if k != "step"},
+                                   "end": Probe(state.sampler, self.seed, self.device).measure(lens, state.deb)}
         if self.replicas.is_writer:
-            self._publish(lens, state.seg, state.deb, record)
+            self._publish(state, record)
             self.checkpoint_path.unlink(missing_ok=True)
+            if state.log is not None:
+                state.log.remove_live()
 
-    def _publish(self, lens: Lens, seg: torch.nn.Module, deb: torch.nn.Module | None, record: dict) -> None:
+    def _publish(self, state: _State, record: dict) -> None:
         staging = self.directory.with_name(self.directory.name + f".staging-{torch.randint(1 << 30, (1,)).item()}")
         staging.mkdir(parents=True)
-        learned = dataclasses.replace(lens.current_spec(), name=self.name,
-                                      description=f"co-designed with scheme {self.scheme.name!r}, seed {self.seed}")
+        start = ", ".join(f"{c:+.4f}" for c in self.initial_um)
+        learned = dataclasses.replace(
+            state.lens.current_spec(), name=self.name,
+            description=f"co-designed with scheme {self.scheme.name!r}, seed {self.seed}, from initial coefficients "
+                        f"[{start}] um (seeded draw of at most {INITIAL_AMPLITUDE_UM} um per free term)")
         (staging / "lens.toml").write_text(spec_to_toml(learned))
-        save_weights(staging / "utility.safetensors", seg)
-        if deb is not None:
-            save_weights(staging / "adversary.safetensors", deb)
+        save_weights(staging / "utility.safetensors", state.seg)
+        if state.deb is not None:
+            save_weights(staging / "adversary.safetensors", state.deb)
         write_json(staging / "record.json", record)
+        assert state.log is not None, "the loop opens the curve log"
+        state.log.publish_into(staging, state.curves, f"{self.name}, seed {self.seed}: {self.scheme.description}")
         publish_directory(staging, self.directory)
 
 
@@ -347,8 +386,10 @@ class _State:
     opt_optics: torch.optim.Optimizer | None
     balance: Balance
     sampler: CropSampler
+    pretraining: dict[str, Any] | None       # the adversary's pre-training record
     step: int = 0                            # the next step to run
     curves: list[dict[str, Any]] = field(default_factory=list)   # one entry per step run
+    log: CurveLog | None = None
 
 
 def _columns(rows: list[dict[str, Any]]) -> dict[str, list]:

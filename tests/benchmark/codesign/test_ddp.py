@@ -136,4 +136,4 @@ def test_only_rank_0_writes_and_resume_reads_its_checkpoint(ranks):
         assert [p.name for p in codesign.iterdir() if "staging" in p.name or p.suffix == ".pt"] == []
         (published,) = codesign.iterdir()
         assert {p.name for p in published.iterdir()} == {"lens.toml", "utility.safetensors", "adversary.safetensors",
-                                                         "record.json"}
+                                                         "record.json", "curves.jsonl", "curves.png", "tensorboard"}
