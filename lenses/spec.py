@@ -9,13 +9,12 @@ LensSpecError naming the offending field.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-
-import itertools
 
 import numpy as np
 

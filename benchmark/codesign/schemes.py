@@ -33,8 +33,9 @@ SCHEMES: dict[str, Scheme] = {
                balance=MTAdamBalance(lambda_deb=1.0)),
         Scheme("gp", "adversarial, lambda_deb = 1 plus the scale-free gradient penalty "
                "(||dL_deb/dtheta_opt|| / ||dL_seg/dtheta_opt|| - 1)^2", balance=GradientPenalty(lambda_deb=1.0)),
-        Scheme("gp-literal", "adversarial, lambda_deb = 1 plus the paper's eq. 4 as printed, (||dL_deb/dtheta_opt||_2 - 1)^2 "
-               "with theta_opt in um (ablation)", balance=GradientPenalty(lambda_deb=1.0, scale_free=False)),
+        Scheme("gp-literal", "adversarial, lambda_deb = 1 plus the paper's eq. 4 as printed, "
+               "(||dL_deb/dtheta_opt||_2 - 1)^2 with theta_opt in um (ablation)",
+               balance=GradientPenalty(lambda_deb=1.0, scale_free=False)),
         Scheme("os-info", "optics + segmentation against the information bound at 32 px plates, no adversary",
                adversary=False, balance=InformationBound(lambda_info=0.01, width_px=32, eps=0.05)),
         Scheme("fixed", "no optics step: the utility net fine-tuned to a fixed lens", optics=False, adversary=False),

@@ -34,8 +34,14 @@ from tqdm.auto import tqdm
 
 from benchmark.cache import config_hash
 from benchmark.codesign.adversary import MARGIN_DB, Probe, build_adversary, pretrain_adversary
-from benchmark.codesign.artifacts import (load_checkpoint, load_weights, publish_directory, save_checkpoint,
-                                          save_weights, write_json)
+from benchmark.codesign.artifacts import (
+    load_checkpoint,
+    load_weights,
+    publish_directory,
+    save_checkpoint,
+    save_weights,
+    write_json,
+)
 from benchmark.codesign.balancing import Balance, OpticsContext, settings
 from benchmark.codesign.coefficients import INITIAL_AMPLITUDE_UM, NOLL_NAMES, bound_limited, initial_coefficients
 from benchmark.codesign.curves import CurveLog

@@ -18,7 +18,8 @@ from lenses.spec import load_spec
 
 def _start_lens() -> Lens:
     start = load_spec(START_SPEC)
-    return Lens(dataclasses.replace(start, mask=dataclasses.replace(start.mask, zernike_um=initial_coefficients(start, 0))))
+    mask = dataclasses.replace(start.mask, zernike_um=initial_coefficients(start, 0))
+    return Lens(dataclasses.replace(start, mask=mask))
 
 
 def test_untrained_residual_adversary_returns_the_white_balanced_image():

@@ -7,12 +7,12 @@ import pytest
 import torch
 
 import lenses
-from benchmark.profiles import PROFILES
 from benchmark.codesign.builtin import START_SPEC, attach
 from benchmark.codesign.coefficients import INITIAL_AMPLITUDE_UM, bound_limited
 from benchmark.codesign.data import CropSampler
 from benchmark.codesign.schemes import SCHEMES
 from benchmark.codesign.trainer import CoDesign, TrainingDivergedError
+from benchmark.profiles import PROFILES
 from lenses.spec import load_spec
 
 TINY = dataclasses.replace(PROFILES["smoke"], image_size=(64, 128), n_train=2, train_crop=(48, 48), batch_size=2,
@@ -141,7 +141,8 @@ def test_bound_limited_names_the_coefficients_on_a_bound():
 
 def test_record_flags_a_lens_that_ends_on_its_bounds(tmp_path):
     # Adam's first step is lr x sign(gradient) per coefficient: lr 5 um throws every free term onto a bound.
-    pinned = run("os", tmp_path / "pinned", dataclasses.replace(TINY, codesign_steps=1, optics_lr=5.0)).train(progress=False)
+    thrown = dataclasses.replace(TINY, codesign_steps=1, optics_lr=5.0)
+    pinned = run("os", tmp_path / "pinned", thrown).train(progress=False)
     assert pinned.record["bound_limited"] is True
     assert pinned.record["bound_limited_terms"] == ["Z2 tilt x", "Z3 tilt y", "Z4 defocus", "Z5 astigmatism 45",
                                                     "Z6 astigmatism 0"]

@@ -12,10 +12,10 @@ import torch
 import torch.distributed as dist
 import torch.multiprocessing as mp
 
-from benchmark.profiles import PROFILES
 from benchmark.codesign.builtin import START_SPEC
 from benchmark.codesign.schemes import SCHEMES
 from benchmark.codesign.trainer import CoDesign
+from benchmark.profiles import PROFILES
 from lenses.spec import load_spec
 
 # test_codesign's tiny profile with two rows per rank: CPU kernels lay out a one-row activation
