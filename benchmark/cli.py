@@ -81,17 +81,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _codesign_lenses() -> list[str]:
-    from lenses.codesign.schemes import SCHEMES
+    from benchmark.codesign.schemes import SCHEMES
     return [name for name, scheme in SCHEMES.items() if scheme.optics]  # "fixed" is no registered lens
 
 
 def cmd_train(args: argparse.Namespace) -> int:
     from benchmark.cache import cache_root
     from benchmark.profiles import get_profile
-    from lenses.codesign.builtin import START_SPEC
-    from lenses.codesign.distributed import session
-    from lenses.codesign.schemes import SCHEMES
-    from lenses.codesign.trainer import CoDesign
+    from benchmark.codesign.builtin import START_SPEC
+    from benchmark.codesign.distributed import session
+    from benchmark.codesign.schemes import SCHEMES
+    from benchmark.codesign.trainer import CoDesign
     from lenses.spec import load_spec
 
     with session(args.device) as (replicas, device):

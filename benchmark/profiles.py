@@ -18,7 +18,7 @@ class Profile:
     n_train: int                  # training scenes (co-design, attackers that fit)
     train_crop: tuple[int, int]   # (h, w) random crops for training
     batch_size: int
-    # Co-design (lenses/codesign)
+    # Co-design (benchmark/codesign)
     utility_model: str            # SegFormer variant (benchmark.utility.segformer)
     adversary_width: int          # RED10 width
     pretrain_steps: int           # clean utility pre-training, shared by all lenses

@@ -39,7 +39,7 @@ from benchmark.schema import Row, RowError, chain_name
 from benchmark.sensing import sense, to_tensor, train_pairs_factory
 from benchmark.utility.measure import has_labels, segmenter, utility_net_for, utility_scores
 from lenses.bound import bound_curve, bound_row
-from lenses.codesign.trainer import pretrain_utility
+from benchmark.codesign.trainer import pretrain_utility
 
 log = logging.getLogger(__name__)
 

@@ -31,11 +31,12 @@ class Lens(torch.nn.Module):
                                                   requires_grad=spec.mask.trainable)
         self.pupil = PupilModel(spec, geometry)
         self.sensor = Sensor(spec.sensor, spec.optics.aperture_diameter_mm)
-        # Networks co-designed with this lens (set by lenses.codesign); plain attributes, not
-        # submodules, so that lens.parameters() stays the optics alone.
+        # Networks co-designed with this lens and the record of that training (set by
+        # benchmark.codesign); plain attributes, not submodules, so that lens.parameters() stays
+        # the optics alone. Not `training`: that is torch's train/eval flag.
         object.__setattr__(self, "utility_net", None)
         object.__setattr__(self, "adversary", None)
-        object.__setattr__(self, "training", None)
+        object.__setattr__(self, "training_record", None)
 
     @property
     def name(self) -> str:

@@ -9,6 +9,7 @@ LensSpecError naming the offending field.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -19,6 +20,7 @@ import numpy as np
 
 from lenses.materials import MATERIALS
 from lenses.registry import suggest
+from lenses.zernike import zernike_noll
 
 N_ZERNIKE = 6
 
@@ -43,6 +45,10 @@ class MaskSpec:
     bounds_um: tuple[tuple[float, float], ...] | None = None  # per-term bounds: declares a trainable mask
     random_seed: int | None = None  # draws zernike_um uniformly in [-random_amplitude_um, +] (Z2..Z6)
     random_amplitude_um: float = 0.0
+    # The largest peak-to-valley relief (um of glass) the mask may have to be made; with bounds_um,
+    # every mask inside the bounds must stay within it (checked), so the bounds are a
+    # manufacturing limit rather than a tuning choice.
+    max_sag_um: float | None = None
 
     @property
     def trainable(self) -> bool:
@@ -89,6 +95,8 @@ class LensSpec:
             d["mask"].pop("bounds_um")
         if d["mask"]["random_seed"] is None:
             d["mask"].pop("random_seed")
+        if d["mask"]["max_sag_um"] is None:
+            d["mask"].pop("max_sag_um")
         return d
 
 
@@ -188,8 +196,33 @@ def _mask(t: dict) -> MaskSpec:
         for i, ((lo, hi), c) in enumerate(zip(bounds, coeffs)):
             if not lo <= c <= hi:
                 raise LensSpecError(f"mask.zernike_um[{i}] = {c} lies outside mask.bounds_um[{i}] = [{lo}, {hi}]")
+    max_sag = None
+    if "max_sag_um" in t:
+        max_sag = _positive(t["max_sag_um"], "mask.max_sag_um")
+        worst = worst_sag_um(bounds if bounds is not None else tuple((c, c) for c in coeffs))
+        if worst > max_sag:
+            what = "the worst mask inside mask.bounds_um" if bounds is not None else "mask.zernike_um"
+            raise LensSpecError(f"{what} has a peak-to-valley relief of {worst:.3f} um, more than mask.max_sag_um = "
+                                f"{max_sag}; narrow the bounds or raise max_sag_um")
     return MaskSpec(zernike_um=tuple(coeffs), bounds_um=bounds, random_seed=seed,
-                    random_amplitude_um=amplitude)  # type: ignore[arg-type]
+                    random_amplitude_um=amplitude, max_sag_um=max_sag)  # type: ignore[arg-type]
+
+
+# Polar grid over the closed unit disk (rim included, where the relief peaks) for worst_sag_um.
+_RHO, _THETA = np.meshgrid(np.linspace(0.0, 1.0, 201), np.linspace(0.0, 2 * np.pi, 361))
+
+
+def worst_sag_um(bounds_um: tuple[tuple[float, float], ...]) -> float:
+    """Largest peak-to-valley relief (um) of any mask h = sum_j c_j Z_j with lo_j <= c_j <= hi_j.
+
+    The relief max(h) - min(h) over the pupil is convex in c, so its maximum over the box of
+    bounds lies at a corner; every corner is evaluated on a polar grid (201 radii x 361 angles,
+    rim included), which resolves the relief of these low orders to about 1e-4 relative.
+    """
+    basis = np.stack([zernike_noll(j + 1, _RHO, _THETA).ravel() for j in range(len(bounds_um))])
+    corners = np.array(list(itertools.product(*[sorted({lo, hi}) for lo, hi in bounds_um])))
+    relief = corners @ basis
+    return float((relief.max(axis=1) - relief.min(axis=1)).max())
 
 
 def _sensor(t: dict) -> SensorSpec:

@@ -22,7 +22,7 @@ from benchmark.run_config import RunConfig
 from benchmark.sensing import to_tensor
 from benchmark.utility.measure import utility_metrics
 from benchmark.scenes import load_scenes
-from lenses.codesign.trainer import pretrain_utility
+from benchmark.codesign.trainer import pretrain_utility
 
 VARIANTS = ("tiny", "b0-narrow", "b0")
 
