@@ -21,10 +21,10 @@ import attacks
 import lenses
 from benchmark.cache import cache_root, config_hash
 from benchmark.metrics import finite_mean, psnr, ssim
-from benchmark.charts.plates import write_plate_gallery
-from benchmark.plates import PlateOutcome, readable, score_scene, summarise
+from benchmark.charts.plate_gallery import write_plate_gallery
+from benchmark.plate_scoring import PlateOutcome, readable, score_scene, summarise
 from benchmark.profiles import Profile
-from benchmark.report import write_sample_grid
+from benchmark.charts.samples import write_sample_grid
 from benchmark.scenes import CLASS_NAMES, PLATE_FORMAT, Scene, load_scenes, plate_entropy_bits
 from lenses.bound import PlateSpectrum, bound_row
 from benchmark.utility.scoring import confusion_matrix, predict, scores, window_for
