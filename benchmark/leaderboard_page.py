@@ -4,7 +4,8 @@ Everything is inline (style, vanilla script, the utility-vs-privacy charts as SV
 external references are the leaderboard's own PNGs, by relative path. The trade-off table has one
 line per entry and threat model: "any attacker" (the markdown table's line) and, for each threat
 model, the worst case among that threat model's attackers only. Selecting a profile, scene set or
-threat model hides the other lines and chart points; clicking a column header sorts by it.
+threat model hides the other lines and chart points (one chart per profile and privacy figure);
+clicking a column header sorts by it.
 """
 
 from __future__ import annotations
@@ -81,7 +82,7 @@ _SCRIPT = """
     var shown = 0;
     document.querySelectorAll("[data-filtered]").forEach(function (el) {
       var keep = Object.keys(want).every(function (k) {
-        return want[k] === "*" || el.getAttribute("data-" + k) === want[k];
+        return want[k] === "*" || !el.hasAttribute("data-" + k) || el.getAttribute("data-" + k) === want[k];
       });
       el.style.display = keep ? "" : "none";
       if (keep && el.tagName === "TR") { shown += 1; }
@@ -234,9 +235,12 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
     for privacy, kind, scale, label, unit in (("psnr_db", "restorer", 1.0, "worst-case attacker PSNR dB", " dB"),
                                               ("plate_acc", "reader", 100.0, "worst-case plate accuracy %", " %")):
         points = _points_by_threat(entries, privacy, kind, scale)
-        if points:
-            svgs.append(f"<figure>{tradeoff_svg(points, label, unit, colours)}<figcaption>Utility against "
-                        f"{_e(label)}; hover a point for the lens, the attacker and the intervals.</figcaption></figure>")
+        for profile in dict.fromkeys(p.profile for p, _ in points):  # budgets are not comparable: a chart each
+            mine = [(p, t) for p, t in points if p.profile == profile]
+            svgs.append(f'<figure data-filtered="1" data-profile="{_e(profile)}">'
+                        f"{tradeoff_svg(mine, label, unit, colours)}<figcaption>Profile {_e(profile)}: utility "
+                        f"against {_e(label)}; hover a point for the lens, the attacker and the intervals."
+                        "</figcaption></figure>")
     samples = [p for p in pictures if not p.name.startswith("plate_width__")]
     per_lens = []
     for lens in lenses:

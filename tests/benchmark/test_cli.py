@@ -1,13 +1,13 @@
 """The CLI end to end on the smoke profile: files, row schema and the physics it must show."""
 
-import json
 import subprocess
 import sys
 
 import pytest
 
-REQUIRED = {"lens", "attack", "seed", "profile", "scenes", "config_hash", "git_commit", "packages", "device",
-            "threads", "wall_s", "date"}
+from benchmark.schema import read_results
+
+PROVENANCE = {"git_commit", "packages", "device", "threads", "wall_s", "date"}
 
 
 @pytest.fixture(scope="module")
@@ -30,28 +30,29 @@ def test_run_writes_results_tables_and_pictures(smoke_run):
 
 def test_rows_follow_the_schema(smoke_run):
     out, _ = smoke_run
-    results = json.loads((out / "results.json").read_text())
-    assert results["meta"]["profile"]["name"] == "smoke"
-    rows = results["rows"]
-    assert {(r["lens"], r["attack"]) for r in rows} >= {
+    results = read_results(out / "results.json")  # validates every row against the schema
+    assert results.meta["profile"]["name"] == "smoke"
+    rows = results.rows
+    assert {(r.lens, r.attack) for r in rows} >= {
         (lens, a) for lens in ("ideal", "defocus")
         for a in ("lens", "utility", "bound", "identity", "wiener-known-psf", "lpdr-oracle",
                   "identity>lpdr-oracle", "wiener-known-psf>lpdr-oracle")} | {("sharp", "utility"), ("sharp", "lpdr-oracle")}
     for r in rows:
-        assert REQUIRED <= set(r), REQUIRED - set(r)
-        assert r["profile"] == "smoke" and r["scenes"] == "synthetic" and r["seed"] == 0
-        assert all(not isinstance(v, (dict, list)) for v in r.values()), "rows are flat"
-        if "psnr_db" in r:
-            assert 0 < r["ssim"] <= 1 and r["psnr_db"] > 0 and r["fit_s"] >= 0 and r["images_per_s"] > 0
-        if "plate_acc" in r:
-            assert 0 <= r["plate_acc"] <= 1 and r["n_plates"] >= 0
-        if r["attack"] == "utility":
-            assert 0 <= r["miou"] <= r["mean_acc"] + 1e-9 and 0 <= r["overall_acc"] <= 1  # IoU <= recall per class
+        assert PROVENANCE <= set(r.provenance), PROVENANCE - set(r.provenance)
+        assert r.profile == "smoke" and r.scenes == "synthetic" and r.seed == 0 and r.ok
+        m = r.metrics
+        if "psnr_db" in m:
+            assert r.kind == "restorer"
+            assert 0 < m["ssim"] <= 1 and m["psnr_db"] > 0 and m["fit_s"] >= 0 and m["images_per_s"] > 0
+        if "plate_acc" in m:
+            assert r.kind in ("reader", "chain") and 0 <= m["plate_acc"] <= 1 and m["n_plates"] >= 0
+        if r.kind == "utility":
+            assert 0 <= m["miou"] <= m["mean_acc"] + 1e-9 and 0 <= m["overall_acc"] <= 1  # IoU <= recall per class
 
 
 def test_ideal_keeps_psnr_defocus_drops_it_and_wiener_beats_identity(smoke_run):
     out, _ = smoke_run
-    rows = {(r["lens"], r["attack"]): r for r in json.loads((out / "results.json").read_text())["rows"]}
+    rows = {(r.lens, r.attack): r.metrics for r in read_results(out / "results.json").rows}
     best_ideal = max(rows["ideal", a]["psnr_db"] for a in ("identity", "wiener-known-psf"))
     best_defocus = max(rows["defocus", a]["psnr_db"] for a in ("identity", "wiener-known-psf"))
     assert best_ideal > best_defocus + 3
