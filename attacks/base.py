@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from enum import Enum
 from pathlib import Path
 from typing import Any, ClassVar, Protocol
@@ -20,6 +20,7 @@ from typing import Any, ClassVar, Protocol
 from torch import Tensor
 
 __all__ = [
+    "ArtifactStore",
     "Attack",
     "FitContext",
     "LensLike",
@@ -59,6 +60,21 @@ class LensLike(Protocol):
         ...
 
 
+class ArtifactStore(Protocol):
+    """Where an attacker keeps what it trained, addressed by (kind, key); the benchmark's cache
+    implements it (``benchmark.cache.ArtifactCache``). Writes are atomic and reads verified: a
+    missing, truncated or corrupt artifact loads as None (and is reported), so the caller rebuilds it.
+    """
+
+    def load(self, kind: str, key: Mapping[str, Any]) -> bytes | None:
+        """The bytes stored under (kind, key), or None when absent or corrupt."""
+        ...
+
+    def save(self, kind: str, key: Mapping[str, Any], data: bytes) -> Path:
+        """Store ``data`` under (kind, key); returns where it went."""
+        ...
+
+
 @dataclasses.dataclass
 class FitContext:
     """Everything an attacker may use to prepare itself; any field may be None.
@@ -67,7 +83,9 @@ class FitContext:
         lens: The camera under attack (``LensLike``), or None when the threat model hides it.
         train_pairs: Callable returning a fresh iterable of ``(sensor, sharp)`` batches from the
             TRAIN split, each a tensor (B, 3, H, W) in [0, 1]; callable so it can be re-iterated.
-        cache_dir: Directory where the attacker may cache trained artifacts.
+        cache_dir: Directory where the attacker may keep files of its own.
+        artifacts: Verified, atomic store for trained weights (``ArtifactStore``); None: cache
+            nothing, train every time.
         device: Torch device string the attacker should run on, e.g. "cpu" or "cuda".
         seed: Seed for any randomness in fitting.
         profile: The benchmark profile (smoke / quick / paper) for sizing training, if any.
@@ -77,6 +95,7 @@ class FitContext:
     lens: LensLike | None = None
     train_pairs: Callable[[], Iterable[tuple[Tensor, Tensor]]] | None = None
     cache_dir: Path | None = None
+    artifacts: ArtifactStore | None = None
     device: str = "cpu"
     seed: int = 0
     profile: object | None = None
@@ -144,6 +163,9 @@ class Attack(ABC):
     requires: ClassVar[frozenset[str]] = frozenset()
     # False: the attacker runs only when named (e.g. a much slower variant of a default one).
     run_by_default: ClassVar[bool] = True
+    # True: a reference row (kind "reference"), not an attack: it shows a condition (e.g. the
+    # uncorrected sensor image) and never counts as a lens's worst case.
+    reference: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)

@@ -72,7 +72,7 @@ class NafnetGeneric(Restorer):
 
     def fit(self, ctx: FitContext) -> None:
         """Load the checkpoint, or train on generic degradations of ``ctx.train_pairs``' sharp
-        crops (loading from ``ctx.cache_dir`` when cached)."""
+        crops (loading from ``ctx.artifacts`` when cached)."""
         if self.checkpoint is not None:
             model = load_nafnet_checkpoint(self.checkpoint, **self.checkpoint_arch)
             self._checkpoint_sha256 = hashlib.sha256(self.checkpoint.read_bytes()).hexdigest()

@@ -51,7 +51,7 @@ class NafnetKnownPairs(Restorer):
         self.engine: InferenceEngine | None = None
 
     def fit(self, ctx: FitContext) -> None:
-        """Train (or load from ``ctx.cache_dir``) a NAFNet on ``ctx.train_pairs``."""
+        """Train (or load from ``ctx.artifacts``) a NAFNet on ``ctx.train_pairs``."""
         assert ctx.lens is not None and ctx.train_pairs is not None  # checked by `requires`
         budget = RestorerBudget.from_profile(ctx.profile)
         sensor, sharp = collect_pairs(ctx.train_pairs, budget.max_train_images)

@@ -17,7 +17,7 @@ import sys
 from importlib.metadata import EntryPoint
 from pathlib import Path
 
-from attacks.base import Attack
+from attacks.base import Attack, Reader, Restorer, ThreatModel
 from lenses.registry import DuplicateNameError, discover, similar, source_of, suggest
 
 __all__ = [
@@ -97,10 +97,12 @@ class PluginFailure:
     Attributes:
         name: The registered name or file spec that failed.
         error: ``'<ExceptionType>: <message>'`` of what went wrong.
+        kind: "restorer" or "reader" when the class was found but failed to construct, else None.
     """
 
     name: str
     error: str
+    kind: str | None = None
 
 
 def available() -> dict[str, str]:
@@ -146,25 +148,53 @@ def load_all(names: list[str] | None = None) -> tuple[list[Attack], list[PluginF
         DuplicatePluginError: Two distributions register the same name.
     """
     registered = discover(ATTACKS_GROUP)
-    requested = sorted(registered) if names is None else list(names)
+    requested = sorted(registered) if names is None else list(dict.fromkeys(names))
     for name in requested:
         if not _is_file_spec(name) and name not in registered:
             raise _unknown(name, registered)
     loaded: list[Attack] = []
     failures: list[PluginFailure] = []
-    for name in requested:
+    sources: dict[str, str] = {}  # attacker name -> where it came from
+    for spec in requested:
+        kind = None
         try:
-            loaded.append(_load(name, registered, {}))
+            cls = _resolve(spec, registered)
+            kind = "reader" if issubclass(cls, Reader) else "restorer" if issubclass(cls, Restorer) else None
+            attacker = cls()
         except UnknownPluginError:
             raise
         except Exception as exc:  # noqa: BLE001 - any plugin bug must not take the run down
-            failure = PluginFailure(name, f"{type(exc).__name__}: {exc}")
-            logger.warning("attacker %r failed to load and is skipped: %s", name, failure.error)
+            failure = PluginFailure(spec, f"{type(exc).__name__}: {exc}", kind)
+            logger.warning("attacker %r failed to load and is skipped: %s", spec, failure.error)
             failures.append(failure)
+            continue
+        _check_unique(attacker.name, _origin(spec, registered), sources, registered)
+        loaded.append(attacker)
     return loaded, failures
 
 
+def _origin(spec: str, registered: dict[str, EntryPoint]) -> str:
+    return f"file {spec}" if _is_file_spec(spec) else f"entry point {source_of(registered[spec])}"
+
+
+def _check_unique(name: str, origin: str, sources: dict[str, str], registered: dict[str, EntryPoint]) -> None:
+    """Raise DuplicatePluginError when `name` is taken by another selected attacker or, for a file
+    plugin, by a registered one (results are keyed by name: two would overwrite each other)."""
+    other = sources.get(name)
+    if other is None and name in registered and origin.startswith("file "):
+        other = f"entry point {source_of(registered[name])}"
+    if other is not None:
+        raise DuplicatePluginError(f"attacker name {name!r} is defined twice: by {other} and by {origin}; "
+                                   "rename one of them (results are keyed by the name)")
+    sources[name] = origin
+
+
 def _load(spec: str, registered: dict[str, EntryPoint], options: dict[str, object]) -> Attack:
+    return _resolve(spec, registered)(**options)
+
+
+def _resolve(spec: str, registered: dict[str, EntryPoint]) -> type[Attack]:
+    """The attacker class of a registered name or file spec, with its class attributes checked."""
     if _is_file_spec(spec):
         obj, origin, registered_name = import_from_file(spec), spec, None
     elif spec in registered:
@@ -174,12 +204,19 @@ def _load(spec: str, registered: dict[str, EntryPoint], options: dict[str, objec
         raise _unknown(spec, registered)
     if not (isinstance(obj, type) and issubclass(obj, Attack)):
         raise TypeError(f"{origin}: {obj!r} is not a subclass of attacks.Attack")
-    if registered_name is not None and getattr(obj, "name", None) != registered_name:
+    name = getattr(obj, "name", None)
+    if not isinstance(name, str) or not name:
+        raise TypeError(f"{origin}: class {obj.__name__} needs a class attribute `name` (a non-empty str, the "
+                        f"attacker's name in results), got {name!r}")
+    if not isinstance(getattr(obj, "threat_model", None), ThreatModel):
+        raise TypeError(f"{origin}: class {obj.__name__} needs a class attribute `threat_model` "
+                        f"(an attacks.ThreatModel: {[t.value for t in ThreatModel]})")
+    if registered_name is not None and name != registered_name:
         raise TypeError(
             f"{origin}: registered as {registered_name!r} but its class attribute "
-            f"name is {getattr(obj, 'name', None)!r}; they must match (results are keyed by it)"
+            f"name is {name!r}; they must match (results are keyed by it)"
         )
-    return obj(**options)
+    return obj
 
 
 def _is_file_spec(spec: str) -> bool:

@@ -5,9 +5,9 @@ the clamped-free output against the sharp crop, AdamW (lr 1e-3, betas (0.9, 0.9)
 1e-3), cosine schedule to 1e-7 over ``steps``. Gradients are clipped to norm 1: the PSNR loss
 is ``10 log10(MSE)``, whose gradient grows as ``1 / MSE`` on an easy batch.
 
-Trained weights are cached as safetensors (never pickle) under
-``cache_dir / <kind> / <config hash>.safetensors`` and written atomically, so a second run, or a
-second lens sharing a lens-independent model, loads instead of retraining.
+Trained weights are cached as safetensors (never pickle) in the fit context's artifact store
+(``FitContext.artifacts``: atomic writes, verified reads), keyed by (attacker, configuration), so a
+second run, or a second lens sharing a lens-independent model, loads instead of retraining.
 """
 
 from __future__ import annotations
@@ -21,12 +21,14 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from safetensors import SafetensorError
 from safetensors.torch import load as load_safetensors
 from safetensors.torch import save as save_safetensors
 from torch import Tensor, nn
 
+from attacks import crops
+from attacks.base import ArtifactStore
 from attacks.networks.nafnet import NAFNet
-from benchmark.cache import atomic_write_bytes, config_hash
 
 __all__ = [
     "RestorerBudget",
@@ -121,22 +123,17 @@ def collect_pairs(train_pairs: Callable[[], Iterable[tuple[Tensor, Tensor]]], ma
 
 
 def random_crops(images: list[Tensor], n: int, crop_px: int, generator: torch.Generator) -> list[Tensor]:
-    """The same ``n`` random crops from each tensor of ``images`` (all (N, C, H, W), aligned).
-
-    Offsets are even so a Bayer-mosaicked image keeps its colour phase; translation is the only
+    """The same ``n`` random square crops from each tensor of ``images`` (all (N, C, H, W), aligned),
+    by the project's sampler (``attacks.crops``) with even offsets. Translation is the only
     augmentation, because flips or rotations would change an asymmetric PSF.
 
     Returns:
         One (n, C, h, w) tensor per input, h = min(crop_px, H) rounded down to even, same for w.
     """
-    count, _, height, width = images[0].shape
+    height, width = images[0].shape[-2:]
     h = min(crop_px, height) // 2 * 2 or height
     w = min(crop_px, width) // 2 * 2 or width
-    index = torch.randint(count, (n,), generator=generator)
-    ys = torch.randint((height - h) // 2 + 1, (n,), generator=generator) * 2
-    xs = torch.randint((width - w) // 2 + 1, (n,), generator=generator) * 2
-    return [torch.stack([t[i, :, y:y + h, x:x + w] for i, y, x in zip(index.tolist(), ys.tolist(), xs.tolist())])
-            for t in images]
+    return crops.random_crops(images, (h, w), generator, n=n)
 
 
 def train_restorer(model: nn.Module, next_batch: Callable[[torch.Generator], tuple[Tensor, Tensor]],
@@ -192,32 +189,33 @@ def lens_key(lens: Any) -> Any:
     return {"spec": repr(lens.spec), "psf_gain": fingerprint(lens.psf().detach(), lens.gain().detach())}
 
 
-def load_or_train(model: nn.Module, cache_dir: Path | None, kind: str, key: dict[str, Any],
+def load_or_train(model: nn.Module, artifacts: ArtifactStore | None, kind: str, key: dict[str, Any],
                   train: Callable[[nn.Module], None]) -> bool:
-    """Load ``model``'s weights from the cache, or train them and cache them.
+    """Load ``model``'s weights from the artifact store, or train them and store them.
 
     Args:
         model: Freshly initialised network; weights are loaded or trained in place.
-        cache_dir: Cache root (None: always train, cache nothing).
-        kind: Sub-folder naming the attacker, e.g. "nafnet-known-pairs".
+        artifacts: The fit context's store (None: always train, store nothing).
+        kind: Artifact kind naming the attacker, e.g. "nafnet-known-pairs".
         key: JSON-serialisable configuration that determines the weights.
         train: Trains ``model`` in place.
 
     Returns:
-        True if the model was trained, False if it came from the cache.
+        True if the model was trained, False if it came from the store.
     """
-    path = None if cache_dir is None else Path(cache_dir) / kind / f"{config_hash(key)}.safetensors"
-    if path is not None and path.is_file():
-        state = load_safetensors(path.read_bytes())
-        model.load_state_dict(state, strict=True)
-        log.info("%s: weights loaded from %s", kind, path)
-        return False
+    data = None if artifacts is None else artifacts.load(kind, key)
+    if data is not None:
+        try:
+            model.load_state_dict(load_safetensors(data), strict=True)
+            log.info("%s: weights loaded from the cache", kind)
+            return False
+        except (SafetensorError, RuntimeError, KeyError) as exc:  # verified bytes of another layout
+            log.warning("%s: cached weights do not fit the network (%s); retraining", kind, exc)
     train(model)
-    if path is not None:
+    if artifacts is not None:
         state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
-        atomic_write_bytes(path, save_safetensors(state, metadata={"kind": kind, "config_hash": config_hash(key)}))
+        artifacts.save(kind, key, save_safetensors(state, metadata={"kind": kind}))
     return True
-
 
 
 def fit_nafnet(budget: RestorerBudget, ctx: Any, kind: str, key: dict[str, Any],
@@ -229,6 +227,6 @@ def fit_nafnet(budget: RestorerBudget, ctx: Any, kind: str, key: dict[str, Any],
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(ctx.seed)
         model = budget.build_nafnet()
-    trained = load_or_train(model, ctx.cache_dir, kind, key,
+    trained = load_or_train(model, ctx.artifacts, kind, key,
                             lambda m: train_restorer(m, next_batch, budget.steps, ctx.device, ctx.seed))
     return model, trained

@@ -1,13 +1,32 @@
-"""The artifact cache: content-addressed by config hash, written atomically."""
+"""The artifact cache: content-addressed by config hash, written atomically, verified on read.
+
+Several runs (processes, Ray workers, nodes) may share one cache folder (`PLB_CACHE`):
+
+- every file is written to a temporary name and renamed, so a reader sees the old file or the
+  whole new one;
+- a verified artifact carries a SHA-256 sidecar (`<name>.sha256`), written after the data; a
+  read checks it, and a missing, truncated or corrupt artifact is reported with its path,
+  removed and read as absent, so its producer rebuilds it;
+- `exclusive(path)` is a per-task lock (an OS file lock, released by the kernel when its holder
+  dies, so a crashed run never leaves a stale lock behind).
+"""
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
 import json
+import logging
 import os
 import tempfile
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
+
+log = logging.getLogger(__name__)
+
+CHECKSUM_SUFFIX = ".sha256"
 
 
 def cache_root() -> Path:
@@ -39,3 +58,81 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
 
 def atomic_write_text(path: Path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def _checksum_path(path: Path) -> Path:
+    return path.with_name(path.name + CHECKSUM_SUFFIX)
+
+
+def write_verified(path: Path, data: bytes) -> Path:
+    """Write `data` atomically, then its SHA-256 sidecar (a reader trusts the data only with it)."""
+    path = Path(path)
+    atomic_write_bytes(path, data)
+    atomic_write_text(_checksum_path(path), hashlib.sha256(data).hexdigest() + "\n")
+    return path
+
+
+def read_verified(path: Path) -> bytes | None:
+    """The bytes of an artifact written by `write_verified`, or None when it is absent.
+
+    A file without its checksum, or whose bytes do not match it (truncated, overwritten), is
+    reported with its path and removed, and reads as absent: the caller rebuilds it.
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        return None
+    try:
+        expected = _checksum_path(path).read_text().strip()
+    except FileNotFoundError:
+        expected = ""
+    actual = hashlib.sha256(data).hexdigest()
+    if actual == expected:
+        return data
+    reason = "has no checksum" if not expected else f"does not match its checksum ({len(data)} bytes)"
+    log.warning("corrupt cache artifact %s: %s; removing it, it will be rebuilt", path, reason)
+    discard(path)
+    return None
+
+
+def discard(path: Path) -> None:
+    """Remove an artifact and its checksum (when a reader found it corrupt)."""
+    Path(path).unlink(missing_ok=True)
+    _checksum_path(Path(path)).unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def exclusive(lock_path: Path) -> Iterator[None]:
+    """Hold an exclusive lock on `lock_path` (created if needed) for the block; waits for it.
+
+    The lock is the kernel's (flock): it dies with its holder, so no stale lock can block a later run.
+    """
+    lock_path = Path(lock_path)
+    lock_path.parent.mkdir(parents=True, exist_ok=True)
+    with open(lock_path, "a+b") as handle:
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
+
+
+class ArtifactCache:
+    """`attacks.ArtifactStore` over a folder: `<root>/<kind>/<config hash of key><suffix>`, verified."""
+
+    def __init__(self, root: Path, suffix: str = ".safetensors"):
+        self.root = Path(root)
+        self.suffix = suffix
+
+    def path(self, kind: str, key: Mapping[str, Any]) -> Path:
+        """Where the artifact of (kind, key) lives."""
+        return self.root / kind / f"{config_hash(dict(key))}{self.suffix}"
+
+    def load(self, kind: str, key: Mapping[str, Any]) -> bytes | None:
+        """The verified bytes of (kind, key), or None (absent, or corrupt and removed)."""
+        return read_verified(self.path(kind, key))
+
+    def save(self, kind: str, key: Mapping[str, Any], data: bytes) -> Path:
+        """Store `data` as the artifact of (kind, key)."""
+        return write_verified(self.path(kind, key), data)

@@ -9,6 +9,7 @@ import logging
 import os
 import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -18,12 +19,13 @@ for _var in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE", "HF_DATASETS_OFFLINE"):
 
 
 def _seeds(text: str) -> list[int]:
+    parts = [s.strip() for s in text.split(",")]
     try:
-        seeds = [int(s) for s in text.split(",") if s.strip() != ""]
+        seeds = [int(s) for s in parts]
     except ValueError:
         raise argparse.ArgumentTypeError(f"--seeds must be comma-separated integers like 0,1,2, got {text!r}") from None
-    if not seeds:
-        raise argparse.ArgumentTypeError("--seeds needs at least one integer")
+    if len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"--seeds lists a seed twice: {text!r}")
     return seeds
 
 
@@ -74,7 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="render leaderboard/README.md and charts from leaderboard/entries/")
     rep.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
     rep.add_argument("--migrate", action="store_true",
-                     help="first rewrite stored entries of an older format in the current one (leaderboard.ENTRY_VERSION)")
+                     help="first rewrite stored entries of an older format in the current one (leaderboard_entries.ENTRY_VERSION)")
     mask = sub.add_parser("export-mask", help="write a lens's phase mask as a height map (um) a fab or Zemax can read")
     mask.add_argument("lens", metavar="LENS",
                       help="registered lens name, a .toml spec, or a leaderboard entry .json (its published mask)")
@@ -138,78 +140,121 @@ def cmd_list() -> int:
     return 0
 
 
+def prepare_out(path: Path | None) -> tuple[Path, bool]:
+    """The output folder (default runs/<date-time>), created and checked writable before any
+    compute; and whether it was created now (so a run that fails early can remove it again)."""
+    out = path or Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {str(out)!r} is a file; give a folder (it is created if missing)")
+    created = not out.exists()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise ValueError(f"--out {str(out)!r} is not a writable folder ({exc.strerror or exc})") from None
+    return out, created
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     import lenses
-    from benchmark import leaderboard, report, runner, schema
-    from benchmark.charts.run_charts import write_run_charts
+    from benchmark import executors, runner
     from benchmark.profiles import get_profile
     from benchmark.provenance import git_commit
-    from benchmark.scenes import load_scenes
+    from benchmark.run_config import RunConfig
+    from benchmark.scenes import PLATE_FORMAT, load_scenes, plate_entropy_bits
 
     git_commit()  # pinned now, as the code was imported: later commits do not re-stamp this run
 
+    # Every check that can fail runs before the output folder exists and before any compute.
     profile = get_profile(args.profile)
     known = lenses.available()
-    for name in args.lens:  # fail before any work on a typo
-        if not (name.endswith(".toml") or Path(name).is_file() or name in known):
+    for name in args.lens:  # fail before any work on a typo or a bad spec field
+        if name.endswith(".toml") or Path(name).is_file():
+            lenses.load_spec(name)
+        elif name not in known:
             lenses.load(name)
     load_scenes(args.scenes, "val", 0, profile.image_size, 0)  # validates the scene set name
-    out = args.out or Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    out.mkdir(parents=True, exist_ok=True)
-    print(f"profile {profile.name}: {json.dumps(profile.to_dict())}")
-    from benchmark.scenes import PLATE_FORMAT, plate_entropy_bits
     plate_format = args.plate_format or PLATE_FORMAT
     plate_entropy_bits(plate_format)  # validates the format before any work
     if args.frames < 1:
         raise ValueError(f"--frames must be >= 1, got {args.frames}")
-    cfg = runner.RunConfig(lenses=args.lens, attacks=args.attack, scenes=args.scenes, profile=profile,
-                           seeds=args.seeds, device=args.device, plate_format=plate_format, frames=args.frames)
-
-    from benchmark import executors
     executors.get(args.executor)  # fails fast on a bad name or a missing Ray
-    t0 = time.perf_counter()
-    result = runner.run(cfg, executor=args.executor)
-    rows = [r if isinstance(r, schema.Row) else schema.migrate_legacy_row(r) for r in result.rows]
+    selection = runner.select_attackers(args.attack)
+    cfg = RunConfig(lenses=args.lens, attacks=args.attack, scenes=args.scenes, profile=profile,
+                    seeds=args.seeds, device=args.device, plate_format=plate_format, frames=args.frames)
+    out, created = prepare_out(args.out)
+    print(f"profile {profile.name}: {json.dumps(profile.to_dict())}")
+    try:
+        t0 = time.perf_counter()
+        result = runner.run(cfg, executor=args.executor, selection=selection)
+    except BaseException:
+        if created and not any(out.iterdir()):
+            out.rmdir()
+        raise
     meta = {"command": sys.argv, "profile": profile.to_dict(), "executor": args.executor,
             "wall_s": time.perf_counter() - t0}
-    schema.write_results(out / "results.json", schema.Results(rows, meta=meta))
+    write_run_outputs(out, result, meta)
+    if args.publish:
+        from benchmark import leaderboard
+        paths = leaderboard.publish_run(result.rows, profile.to_dict(), result.lens_info, out,
+                                        settings=result.settings)
+        print(f"published {len(paths)} leaderboard entries; rendered the leaderboard")
+    print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({meta['wall_s']:.1f} s)")
+    return report_failures(result.failed)
+
+
+def write_run_outputs(out: Path, result, meta: dict) -> None:
+    """results.json (schema rows + their settings), tables, pictures and charts of a run."""
+    from benchmark import report
+    from benchmark.charts.run_charts import write_run_charts
+    from benchmark.schema import Results, write_results
+    write_results(out / "results.json", Results(result.rows, result.settings, meta))
     for picture in result.pictures:
         shutil.copyfile(picture, out / picture.name)
     if result.plates:
         report.write_plate_records(out, result.plates)
-    write_run_charts(out, rows, result.plates, result.bound_curves)
-    table = report.write_tables(out, rows)
+    write_run_charts(out, result.rows, result.plates, result.bound_curves)
+    report.write_tables(out, result.rows)
     print((out / "table.md").read_text())
-    if args.publish:
-        leaderboard.publish_run(rows, profile.to_dict(), result.lens_info, out)
-    print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({len(table)} table rows, "
-          f"{meta['wall_s']:.1f} s)")
-    return 0
+
+
+def report_failures(failed: list) -> int:
+    """Print what failed (attacker, stage, message, where) and return the exit status: 0 when
+    nothing failed, 1 otherwise (the other rows are written all the same)."""
+    if not failed:
+        return 0
+    print(f"error: {len(failed)} row(s) failed:", file=sys.stderr)
+    for row in failed:
+        e = row.error
+        print(f"  {row.lens} / {row.attack} / seed {row.seed}: {e.attacker} failed at {e.stage}: {e.message}",
+              file=sys.stderr)
+    return 1
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from benchmark import leaderboard, leaderboard_report
-    directory = args.dir or leaderboard.LEADERBOARD
+    from benchmark import leaderboard_entries, leaderboard_report
+    directory = args.dir or leaderboard_entries.LEADERBOARD
     if not (directory / "entries").is_dir():
         raise ValueError(f"no leaderboard entries in {directory / 'entries'}; publish some with "
                          "`python -m benchmark run --lens NAME --publish`")
     if args.migrate:
-        for path in leaderboard.migrate_directory(directory):
-            print(f"migrated {path} to entry format {leaderboard.ENTRY_VERSION}")
+        for path in leaderboard_entries.migrate_directory(directory):
+            print(f"migrated {path} to entry format {leaderboard_entries.ENTRY_VERSION}")
     for path in leaderboard_report.render(directory):
         print(f"wrote {path}")
-    if args.dir is None and leaderboard_report.update_readme(leaderboard.LEADERBOARD.parent / "README.md"):
+    if args.dir is None and leaderboard_report.update_readme(leaderboard_entries.LEADERBOARD.parent / "README.md"):
         print("updated the results table of README.md")
     return 0
 
 
 def cmd_study(args: argparse.Namespace) -> int:
-    from benchmark import leaderboard, leaderboard_report
+    from benchmark import leaderboard_entries, leaderboard_report
     from benchmark.profiles import get_profile
-    from benchmark.runner import to_tensor
+    from benchmark.sensing import to_tensor
     from benchmark.scenes.loading import load_scene
     from benchmark.studies import psf_grid, utility_size
-    directory = args.dir or leaderboard.LEADERBOARD
+    directory = args.dir or leaderboard_entries.LEADERBOARD
     t0 = time.perf_counter()
     if args.name == "psf-grid":
         scene = to_tensor([load_scene("synthetic", "val", 0, (256, 512), 0)])
@@ -252,6 +297,7 @@ def cmd_export_mask(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from lenses.registry import DuplicateNameError
     args = build_parser().parse_args(argv)
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", force=True)
@@ -259,6 +305,6 @@ def main(argv: list[str] | None = None) -> int:
                 "export-mask": cmd_export_mask}
     try:
         return commands[args.command](*(() if args.command == "list" else (args,)))
-    except (ValueError, LookupError, NotImplementedError, FileNotFoundError) as exc:
+    except (ValueError, LookupError, NotImplementedError, FileNotFoundError, DuplicateNameError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -13,26 +13,28 @@ from typing import Protocol
 import torch
 from tqdm.auto import tqdm
 
-from benchmark.tasks import Task, TaskResult, execute
+from benchmark.planning import Task
+from benchmark.run_config import RunConfig
+from benchmark.tasks import TaskResult, execute
 
 log = logging.getLogger(__name__)
 
 
 class Executor(Protocol):
-    def run(self, tasks: list[Task], cfg, directory: Path) -> dict[str, TaskResult]: ...
+    def run(self, tasks: list[Task], cfg: RunConfig, directory: Path) -> dict[str, TaskResult]: ...
 
 
 class LocalExecutor:
     """Tasks in plan order, in this process."""
 
-    def run(self, tasks: list[Task], cfg, directory: Path) -> dict[str, TaskResult]:
+    def run(self, tasks: list[Task], cfg: RunConfig, directory: Path) -> dict[str, TaskResult]:
         results = {}
         for task in tqdm(tasks, desc="tasks", unit="task"):
             results[task.key] = execute(task, cfg, directory)
         return results
 
 
-def _remote_execute(task: Task, cfg, directory: Path, threads: int, *_deps: object) -> TaskResult:
+def _remote_execute(task: Task, cfg: RunConfig, directory: Path, threads: int, *_deps: object) -> TaskResult:
     # Same intra-op thread count as the driver: float reductions, hence the numbers, stay identical.
     torch.set_num_threads(threads)
     return execute(task, cfg, directory)
@@ -54,7 +56,7 @@ class RayExecutor:
         self.address = address
         self.max_retries = max_retries
 
-    def run(self, tasks: list[Task], cfg, directory: Path) -> dict[str, TaskResult]:
+    def run(self, tasks: list[Task], cfg: RunConfig, directory: Path) -> dict[str, TaskResult]:
         ray = self.ray
         started_here = not ray.is_initialized()
         if started_here:

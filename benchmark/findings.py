@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 
-from benchmark.leaderboard import Entry, Stat
+from benchmark.leaderboard_entries import Entry, Stat
 
 # (claim, lens a, lens b, metric, kind, expected sign of a - b). kind "utility" reads the utility
 # row, "restorer" the strongest restorer's figure; sign 0 means "a no higher than b".

@@ -20,7 +20,7 @@ from matplotlib.ticker import MaxNLocator
 from benchmark.cache import atomic_write_text
 from benchmark.charts.tradeoff import TradeoffPoint, tradeoff_points
 from benchmark.findings import check_findings
-from benchmark.leaderboard import Entry
+from benchmark.leaderboard_entries import Entry
 from benchmark.leaderboard_tables import MAIN_COLUMNS, pm
 
 ANY_THREAT = "any attacker"

@@ -12,7 +12,7 @@ from benchmark.charts import save_figure
 from benchmark.charts.attacker_speed import write_attacker_speed_chart
 from benchmark.charts.profiles import write_profile_chart
 from benchmark.charts.tradeoff import write_tradeoff_chart
-from benchmark.leaderboard import LEADERBOARD, Entry, display_order, load_entries
+from benchmark.leaderboard_entries import LEADERBOARD, Entry, display_order, load_entries
 from benchmark.leaderboard_page import write_page
 from benchmark.leaderboard_tables import attacker_table, findings_table, main_table
 

@@ -10,7 +10,7 @@ import dataclasses
 from collections.abc import Callable, Sequence
 
 from benchmark.findings import check_findings
-from benchmark.leaderboard import Entry, Stat
+from benchmark.leaderboard_entries import Entry, Stat
 
 # A cell: its text and the number it sorts by (None: empty).
 Cell = tuple[str, float | None]

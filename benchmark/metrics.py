@@ -7,8 +7,6 @@ data_range=1, channel_axis=...)`, i.e. Wang et al. 2004), vectorised in torch.
 
 from __future__ import annotations
 
-import math
-
 import torch
 import torch.nn.functional as F
 
@@ -51,6 +49,10 @@ def ssim(x: torch.Tensor, ref: torch.Tensor, data_range: float = 1.0) -> torch.T
 
 
 def finite_mean(values: torch.Tensor) -> float:
-    """Mean of per-image values, as a float (inf PSNR of an exact copy stays inf)."""
+    """Mean of per-image values, as a float. +inf (the PSNR of an exact copy) stays inf; NaN (an
+    output that is not a number) is never scored: ValueError."""
     v = values.double()
-    return float(v.mean()) if torch.isfinite(v).all() else math.inf
+    if bool(torch.isnan(v).any()):
+        raise ValueError(f"{int(torch.isnan(v).sum())} of {v.numel()} per-image values are NaN; "
+                         "a non-finite output is not scored")
+    return float(v.mean())

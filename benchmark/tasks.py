@@ -1,235 +1,324 @@
-"""A run as a graph of tasks, each producing an artifact addressed by its key, written atomically.
+"""Run one planned task (`benchmark.planning`) unless its result is cached; the task bodies.
 
-Tasks per seed: `clean-utility` (the shared clean segmentation net), `spectrum` (plate spectrum
-of the bound), `sharp` (reference rows on the sharp scenes); per lens and seed: `lens` (train or
-load it; lens row), `utility`, `bound`, `fit` (one per restorer: train or load it), and `evaluate`
-(restore with every restorer, read with every reader on the sensor image and on each restored
-image, sample pictures). Trained networks live in the cache under their own config hash; a task's
-result (its rows, plate records and metadata) is a JSON file in a directory named after the run's
-config hash, so a task can run on any machine that sees the cache, and re-running it is a no-op.
+A task's result (its rows, the settings they point at, plate records and metadata) is a
+verified JSON file in a folder named after the task, inside the run's folder of the cache, so a
+task can run on any machine that sees the cache and re-running it is a no-op. Several runs may
+share the cache: a per-task lock makes one of them compute and the others read its result; a
+corrupt result is reported with its path and recomputed.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import os
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import torch
 
 import attacks
 import lenses
-from benchmark import runner as R
-from benchmark.cache import config_hash
+from benchmark.cache import ArtifactCache, discard, exclusive, read_verified, write_verified
+from benchmark.charts.plate_gallery import write_plate_gallery
+from benchmark.evaluation import Attacked, Target, attempt, run_reader, run_restorers
+from benchmark.intervals import utility_intervals
+from benchmark.planning import AttackerRef, Task, fit_task
 from benchmark.plate_spectrum import cached_plate_spectrum
-from benchmark.provenance import git_commit, provenance
-from benchmark.scenes import load_scenes
-from benchmark.scenes import plate_entropy_bits
-from lenses.bound import bound_curve
+from benchmark.plate_scoring import readable
+from benchmark.provenance import provenance
+from benchmark.charts.samples import write_sample_grid
+from benchmark.rows import RowBuilder
+from benchmark.run_config import RunConfig, training_scenes
+from benchmark.scenes import Scene, load_scenes, plate_entropy_bits
+from benchmark.schema import Row, RowError, chain_name
+from benchmark.sensing import sense, to_tensor, train_pairs_factory
+from benchmark.utility.measure import has_labels, segmenter, utility_net_for, utility_scores
+from lenses.bound import bound_curve, bound_row
 from lenses.codesign.trainer import pretrain_utility
 
-TASK_VERSION = 1
+log = logging.getLogger(__name__)
+
 BOUND_CURVE_WIDTHS_PX = (4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192)
-
-
-@dataclass(frozen=True)
-class Task:
-    kind: str
-    seed: int
-    lens: str = ""
-    attack: str = ""
-    deps: tuple[str, ...] = ()
-    cpus: float = 1.0  # what the task asks a cluster scheduler for
-    gpus: float = 0.0
-
-    @property
-    def key(self) -> str:
-        parts = [self.kind, f"s{self.seed}", self.lens, self.attack]
-        text = "_".join(p for p in parts if p)
-        return "".join(c if c.isalnum() or c in "-_." else "-" for c in text)
+RESULT_FILE = "result.json"
 
 
 @dataclass
 class TaskResult:
-    rows: list[dict] = field(default_factory=list)
+    """What a task produced: rows, the settings they point at (hash -> settings), plates, metadata."""
+
+    rows: list[Row] = field(default_factory=list)
+    settings: dict[str, dict] = field(default_factory=dict)
     plates: list[dict] = field(default_factory=list)
     meta: dict = field(default_factory=dict)
 
+    def to_json(self) -> dict[str, Any]:
+        return {"rows": [r.to_json() for r in self.rows], "settings": self.settings, "plates": self.plates,
+                "meta": self.meta}
 
-def run_directory(cfg: R.RunConfig) -> Path:
-    """Where a run's task results live: one folder per (configuration, code version)."""
-    key = config_hash({"version": TASK_VERSION, "commit": git_commit(), "lenses": cfg.lenses, "attacks": cfg.attacks,
-                       "scenes": cfg.scenes, "profile": cfg.profile.to_dict(), "seeds": cfg.seeds,
-                       "device": cfg.device, "plate_format": cfg.plate_format, "frames": cfg.frames})
-    return Path(cfg.cache_dir) / "tasks" / key
-
-
-def plan(cfg: R.RunConfig, restorers: list[str], readers: list[str]) -> list[Task]:
-    """Tasks in an order that respects their dependencies."""
-    gpu = 1.0 if cfg.device.startswith("cuda") else 0.0
-    tasks: list[Task] = []
-    for seed in cfg.seeds:
-        clean = Task("clean-utility", seed, cpus=2, gpus=gpu)
-        spectrum = Task("spectrum", seed)
-        tasks += [clean, spectrum, Task("sharp", seed, attack=",".join(readers), deps=(clean.key,), gpus=gpu)]
-        for lens in cfg.lenses:
-            t_lens = Task("lens", seed, lens, deps=(clean.key,), cpus=2, gpus=gpu)
-            t_util = Task("utility", seed, lens, deps=(t_lens.key, clean.key), cpus=2, gpus=gpu)
-            t_bound = Task("bound", seed, lens, deps=(t_lens.key, spectrum.key))
-            fits = [Task("fit", seed, lens, name, deps=(t_lens.key,), cpus=2, gpus=gpu) for name in restorers]
-            t_eval = Task("evaluate", seed, lens, ",".join(restorers + ["|"] + readers),
-                          deps=(t_lens.key, t_util.key, *(f.key for f in fits)), cpus=2, gpus=gpu)
-            tasks += [t_lens, t_util, t_bound, *fits, t_eval]
-    return tasks
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> TaskResult:
+        return cls([Row.from_json(r) for r in d["rows"]], d["settings"], d["plates"], d["meta"])
 
 
 def load_result(directory: Path, task: Task) -> TaskResult | None:
-    path = directory / task.key / "result.json"
-    if not path.is_file():
+    """The task's stored result, or None when absent or corrupt (reported with its path, removed)."""
+    path = directory / task.key / RESULT_FILE
+    data = read_verified(path)
+    if data is None:
         return None
-    d = json.loads(path.read_text())
-    return TaskResult(d["rows"], d["plates"], d["meta"])
+    try:
+        return TaskResult.from_json(json.loads(data))
+    except (ValueError, KeyError, TypeError) as exc:  # verified bytes of an older layout
+        log.warning("unreadable task result %s (%s); it will be recomputed", path, exc)
+        discard(path)
+        return None
 
 
-def execute(task: Task, cfg: R.RunConfig, directory: Path) -> TaskResult:
-    """Run one task unless its result exists; publish the result directory in one rename."""
+def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
+    """Run one task unless its result exists; publish the result folder in one rename.
+
+    The per-task lock lets one run compute while others sharing the cache wait and read its
+    result; staging folders are removed only under that lock, i.e. only when their owner is gone.
+    """
     done = load_result(directory, task)
     if done is not None:
         return done
     directory.mkdir(parents=True, exist_ok=True)
-    for stale in directory.glob(f".{task.key}.staging-*"):  # left by a worker that died mid-task
-        shutil.rmtree(stale, ignore_errors=True)
-    staging = directory / f".{task.key}.staging-{os.getpid()}-{time.monotonic_ns()}"
-    staging.mkdir(parents=True)
-    t0 = time.perf_counter()
-    result = _KINDS[task.kind](task, cfg, staging)
-    for row in result.rows:
-        row["wall_s"] = time.perf_counter() - t0
-    (staging / "result.json").write_text(json.dumps(
-        {"rows": result.rows, "plates": result.plates, "meta": result.meta}, default=str))
-    final = directory / task.key
-    if final.exists():  # another worker finished it first (a retried task): keep theirs
-        shutil.rmtree(staging)
-    else:
+    with exclusive(directory / f".{task.key}.lock"):
+        done = load_result(directory, task)  # another run finished it while this one waited
+        if done is not None:
+            return done
+        for stale in directory.glob(f".{task.key}.staging-*"):  # left by a run that died mid-task
+            shutil.rmtree(stale, ignore_errors=True)
+        staging = directory / f".{task.key}.staging-{os.getpid()}-{time.monotonic_ns()}"
+        staging.mkdir(parents=True)
+        t0 = time.perf_counter()
+        result = _KINDS[task.kind](task, cfg, staging)
+        for row in result.rows:
+            row.provenance["wall_s"] = time.perf_counter() - t0
+        write_verified(staging / RESULT_FILE, json.dumps(result.to_json(), default=str, allow_nan=False).encode())
+        final = directory / task.key
+        if final.exists():  # a corrupt result, found and discarded above
+            shutil.rmtree(final)
         os.replace(staging, final)
-    return load_result(directory, task)  # type: ignore[return-value]
+    loaded = load_result(directory, task)
+    if loaded is None:
+        raise RuntimeError(f"task {task.key}: its result {directory / task.key / RESULT_FILE} vanished after writing")
+    return loaded
+
+
+# ---- helpers of the task bodies ----------------------------------------------------------------
+
+def _scenes(cfg: RunConfig, seed: int) -> list[Scene]:
+    return load_scenes(cfg.scenes, "val", cfg.profile.n_val, cfg.profile.image_size, seed)
+
+
+def _clean_net(cfg: RunConfig, seed: int, scenes: list[Scene]) -> torch.nn.Module | None:
+    if not has_labels(scenes):
+        return None
+    return pretrain_utility(cfg.profile, seed, cfg.device, cfg.cache_dir, training_scenes(cfg.scenes),
+                            progress=False)
+
+
+def _lens(cfg: RunConfig, name: str, seed: int) -> lenses.Lens:
+    return lenses.load(name, profile=cfg.profile, seed=seed, device=cfg.device, cache_dir=cfg.cache_dir,
+                       scenes=training_scenes(cfg.scenes)).to(cfg.device)
+
+
+def _builder(cfg: RunConfig, lens_name: str, seed: int, lens: lenses.Lens | None, **extra: Any) -> RowBuilder:
+    settings = {"lens": lens.current_spec().to_dict() if lens is not None else lens_name,
+                "profile": cfg.profile.to_dict(), "scenes": cfg.scenes, "seed": seed, **extra}
+    return RowBuilder(cfg, lens_name, seed, settings, provenance(cfg.device))
+
+
+def fit_context(lens: lenses.Lens | None, cfg: RunConfig, seed: int,
+                segment: Callable[[torch.Tensor], torch.Tensor] | None) -> attacks.FitContext:
+    """What an attacker of this lens may use: the lens, training pairs, cache, device, seed, profile."""
+    folder = Path(cfg.cache_dir) / "attacks"
+    return attacks.FitContext(lens=lens, train_pairs=None if lens is None else train_pairs_factory(lens, cfg, seed),
+                              cache_dir=folder, artifacts=ArtifactCache(folder), device=cfg.device, seed=seed,
+                              profile=cfg.profile, extras={"segmenter": segment})
+
+
+def _load_attackers(refs: tuple[AttackerRef, ...], kind: type[attacks.Attack], builder: RowBuilder
+                    ) -> tuple[list[Any], list[Row]]:
+    """The attackers of `refs` that load; a failed row per attacker that does not."""
+    loaded, failed = [], []
+    for ref in refs:
+        attacker = attempt(ref.name, "load", lambda: attacks.load(ref.spec))
+        if isinstance(attacker, RowError):
+            row_kind = "reader" if kind is attacks.Reader else "restorer"
+            failed.append(builder.failed(row_kind, ref.name, attacker, **{row_kind: ref.name}))
+        elif isinstance(attacker, kind):
+            loaded.append(attacker)
+    return loaded, failed
 
 
 # ---- task bodies -----------------------------------------------------------------------------
 
-def _scenes(cfg: R.RunConfig, seed: int):
-    return load_scenes(cfg.scenes, "val", cfg.profile.n_val, cfg.profile.image_size, seed)
-
-
-def _clean_net(cfg: R.RunConfig, seed: int, scenes) -> torch.nn.Module | None:
-    if not R.has_labels(scenes):
-        return None
-    return pretrain_utility(cfg.profile, seed, cfg.device, cfg.cache_dir, R.training_scenes(cfg.scenes),
-                            progress=False)
-
-
-def _lens(cfg: R.RunConfig, name: str, seed: int) -> lenses.Lens:
-    return lenses.load(name, profile=cfg.profile, seed=seed, device=cfg.device, cache_dir=cfg.cache_dir,
-                       scenes=R.training_scenes(cfg.scenes)).to(cfg.device)
-
-
-def _base_config(cfg: R.RunConfig, lens: lenses.Lens, seed: int) -> dict:
-    return {"lens": lens.current_spec().to_dict(), "profile": cfg.profile.to_dict(), "scenes": cfg.scenes,
-            "seed": seed}
-
-
-def _clean_utility(task: Task, cfg: R.RunConfig, _: Path) -> TaskResult:
+def _clean_utility(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     _clean_net(cfg, task.seed, _scenes(cfg, task.seed))
     return TaskResult()
 
 
-def _spectrum(task: Task, cfg: R.RunConfig, _: Path) -> TaskResult:
+def _spectrum(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     cached_plate_spectrum(cfg.cache_dir, cfg.profile.bound_scenes, seed=task.seed)
     return TaskResult()
 
 
-def _sharp(task: Task, cfg: R.RunConfig, _: Path) -> TaskResult:
+def _sharp(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
+    """Rows measured on the sharp scenes themselves (lens `sharp`, the paper's "Original"):
+    the clean utility net's scores and every reader."""
     scenes = _scenes(cfg, task.seed)
-    rows, plates = R.sharp_reference(task.seed, cfg, R.to_tensor(scenes), scenes, _readers(task.attack),
-                                     provenance(cfg.device), _clean_net(cfg, task.seed, scenes))
-    return TaskResult(rows, plates)
+    sharp = to_tensor(scenes)
+    clean = _clean_net(cfg, task.seed, scenes)
+    builder = _builder(cfg, "sharp", task.seed, None)
+    rows: list[Row] = []
+    if clean is not None:
+        metrics, confusion = utility_scores(clean, sharp, scenes, cfg)
+        row = builder.row("utility", metrics)
+        utility_intervals(row, confusion)
+        rows.append(row)
+    segment = segmenter(clean, cfg) if clean is not None else None
+    target = Target("sharp", scenes, sharp, sharp, fit_context(None, cfg, task.seed, segment), segment, segment)
+    readers, failed = _load_attackers(task.readers, attacks.Reader, builder)
+    out = Attacked(rows=rows + failed)
+    for reader in readers:
+        if reader.skip_reason(target.ctx) is None:
+            run_reader(target, reader, cfg, builder, out)
+    return TaskResult(out.rows, builder.settings, out.plates)
 
 
-def _lens_task(task: Task, cfg: R.RunConfig, _: Path) -> TaskResult:
+def _lens_task(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     t0 = time.perf_counter()
     lens = _lens(cfg, task.lens, task.seed)
     fit_s = time.perf_counter() - t0
-    sharp = R.to_tensor(_scenes(cfg, task.seed))
+    sharp = to_tensor(_scenes(cfg, task.seed))
     t0 = time.perf_counter()
-    R.sense(lens, sharp, cfg.profile.batch_size, task.seed, cfg.device)
+    sense(lens, sharp, cfg.profile.batch_size, task.seed, cfg.device)
     speed = sharp.shape[0] / (time.perf_counter() - t0)
-    metrics = {"images_per_s": speed, "fit_s": fit_s, "psf_size_px": lens.geometry.psf_size_px,
+    metrics = {"images_per_s": speed, "fit_s": fit_s, "psf_size_px": float(lens.geometry.psf_size_px),
                "psf_energy": float(lens.psf_and_energy()[1].min())}
-    row = R.make_row(task.lens, "lens", task.seed, cfg, metrics, {**_base_config(cfg, lens, task.seed), "attack": "lens"},
-                     provenance(cfg.device))
+    builder = _builder(cfg, task.lens, task.seed, lens)
     spec = lens.current_spec()
-    return TaskResult([row], meta={"coefficients_um": list(spec.mask.zernike_um), "spec": spec.to_dict()})
+    return TaskResult([builder.row("lens", metrics)], builder.settings,
+                      meta={"coefficients_um": list(spec.mask.zernike_um), "spec": spec.to_dict()})
 
 
-def _utility(task: Task, cfg: R.RunConfig, _: Path) -> TaskResult:
+def _utility(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     scenes = _scenes(cfg, task.seed)
-    if not R.has_labels(scenes):
+    if not has_labels(scenes):
         return TaskResult()
     lens = _lens(cfg, task.lens, task.seed)
-    net, fit_s = R.utility_net_for(lens, task.lens, task.seed, cfg)
-    sensor = R.sense(lens, R.to_tensor(scenes), cfg.profile.batch_size, task.seed, cfg.device)
-    metrics = {**R.utility_metrics(net, sensor, scenes, cfg), "fit_s": fit_s}
-    return TaskResult([R.make_row(task.lens, "utility", task.seed, cfg, metrics,
-                                  {**_base_config(cfg, lens, task.seed), "attack": "utility"}, provenance(cfg.device))])
+    net, fit_s = utility_net_for(lens, task.lens, task.seed, cfg)
+    sensor = sense(lens, to_tensor(scenes), cfg.profile.batch_size, task.seed, cfg.device)
+    metrics, confusion = utility_scores(net, sensor, scenes, cfg)
+    builder = _builder(cfg, task.lens, task.seed, lens)
+    row = builder.row("utility", {**metrics, "fit_s": fit_s})
+    utility_intervals(row, confusion)
+    return TaskResult([row], builder.settings)
 
 
-def _bound(task: Task, cfg: R.RunConfig, _: Path) -> TaskResult:
+def _bound(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     lens = _lens(cfg, task.lens, task.seed)
     spectrum = cached_plate_spectrum(cfg.cache_dir, cfg.profile.bound_scenes, seed=task.seed)
-    config = {**_base_config(cfg, lens, task.seed), "attack": "bound", "plate_format": cfg.plate_format,
-              "frames": cfg.frames}
-    curve = bound_curve(lens, spectrum, BOUND_CURVE_WIDTHS_PX, plate_entropy_bits(cfg.plate_format))
-    return TaskResult([R.make_row(task.lens, "bound", task.seed, cfg, R.bound_metrics(lens, spectrum, cfg), config,
-                                  provenance(cfg.device))],
+    bits = plate_entropy_bits(cfg.plate_format)
+    t0 = time.perf_counter()
+    values = bound_row(lens, spectrum, bits, frames=tuple(sorted({1, cfg.frames})))
+    metrics = {k: float(v) for k, v in values.items() if not isinstance(v, str)}
+    metrics["fit_s"] = time.perf_counter() - t0
+    notes = {k: v for k, v in values.items() if isinstance(v, str)}
+    notes["bound_plate_format"] = cfg.plate_format
+    builder = _builder(cfg, task.lens, task.seed, lens, plate_format=cfg.plate_format, frames=cfg.frames)
+    curve = bound_curve(lens, spectrum, BOUND_CURVE_WIDTHS_PX, bits)
+    return TaskResult([builder.row("bound", metrics, notes=notes)], builder.settings,
                       meta={"curve": {k: [float(x) for x in v] for k, v in curve.items()}})
 
 
-def _fit(task: Task, cfg: R.RunConfig, _: Path) -> TaskResult:
-    lens = _lens(cfg, task.lens, task.seed)
-    attacker = attacks.load(task.attack)
-    ctx = R.fit_context(lens, cfg, task.seed, None)
+def _fit(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
+    """Fit one restorer; its failure is recorded (meta "error"), never raised."""
+    (ref,) = task.restorers
+    attacker = attempt(ref.name, "load", lambda: attacks.load(ref.spec))
+    if isinstance(attacker, RowError):
+        return TaskResult(meta={"error": attacker.to_json()})
+    ctx = fit_context(_lens(cfg, task.lens, task.seed), cfg, task.seed, None)
     reason = attacker.skip_reason(ctx)
     if reason:
         return TaskResult(meta={"skipped": reason})
     t0 = time.perf_counter()
-    attacker.fit(ctx)
+    error = attempt(ref.name, "fit", lambda: attacker.fit(ctx))
+    if isinstance(error, RowError):
+        return TaskResult(meta={"error": error.to_json()})
     return TaskResult(meta={"fit_s": time.perf_counter() - t0})
 
 
-def _evaluate(task: Task, cfg: R.RunConfig, staging: Path) -> TaskResult:
-    restorer_names, reader_names = task.attack.split("|")
-    restorers = [attacks.load(n) for n in restorer_names.strip(",").split(",") if n]
-    directory = staging.parent
-    fit_s = {}
-    for r in restorers:
-        done = load_result(directory, Task("fit", task.seed, task.lens, r.name))
-        if done is not None and "skipped" not in done.meta:
-            fit_s[r.name] = done.meta["fit_s"]
+def _evaluate(task: Task, cfg: RunConfig, staging: Path) -> TaskResult:
+    """Every restorer and every reader chain on one lens and seed; sample pictures into `staging`."""
+    lens = _lens(cfg, task.lens, task.seed)
     scenes = _scenes(cfg, task.seed)
+    sharp = to_tensor(scenes)
     clean = _clean_net(cfg, task.seed, scenes)
-    rows, plates, pictures = R.evaluate_lens(task.lens, _lens(cfg, task.lens, task.seed), task.seed, cfg, scenes,
-                                             [r for r in restorers if r.name in fit_s], _readers(reader_names),
-                                             provenance(cfg.device), clean, fit_s, staging)
-    return TaskResult(rows, plates, meta={"pictures": pictures})
+    lens_net = utility_net_for(lens, task.lens, task.seed, cfg)[0] if clean is not None else None
+    segment_sensor = segmenter(lens_net, cfg) if lens_net is not None else None
+    target = Target(task.lens, scenes, sharp, sense(lens, sharp, cfg.profile.batch_size, task.seed, cfg.device),
+                    fit_context(lens, cfg, task.seed, segment_sensor), segment_sensor,
+                    segmenter(clean, cfg) if clean is not None else None, lens)
+    builder = _builder(cfg, task.lens, task.seed, lens)
+    restorers, failed_restorers = _load_attackers(task.restorers, attacks.Restorer, builder)
+    readers, failed_readers = _load_attackers(task.readers, attacks.Reader, builder)
+    fitted = {ref.name: _fit_meta(staging.parent, task, ref) for ref in task.restorers}
+    out = Attacked(rows=failed_restorers + failed_readers)
+    run_restorers(target, restorers, fitted, cfg, builder, out)
+    pictures = [_sample_grid(target, out, staging)]
+    for reader in readers:
+        reason = reader.skip_reason(target.ctx)
+        if reason:
+            log.info("%s on %s skipped: %s", reader.name, task.lens, reason)
+            continue
+        run_reader(target, reader, cfg, builder, out)
+        gallery = _plate_gallery(target, out, reader.name, staging)
+        pictures += [gallery] if gallery else []
+    return TaskResult(out.rows, builder.settings, out.plates, meta={"pictures": pictures})
 
 
-def _readers(names: str) -> list[attacks.Reader]:
-    out = [attacks.load(n) for n in names.strip(",").split(",") if n]
-    return [r for r in out if isinstance(r, attacks.Reader)]
+def _fit_meta(directory: Path, task: Task, ref: AttackerRef) -> dict:
+    done = load_result(directory, fit_task(task.seed, task.lens, ref))
+    if done is None:
+        raise RuntimeError(f"task {task.key} ran before the fit of {ref.name!r} finished; the executor broke the order")
+    return done.meta
 
 
-_KINDS = {"clean-utility": _clean_utility, "spectrum": _spectrum, "sharp": _sharp, "lens": _lens_task,
-          "utility": _utility, "bound": _bound, "fit": _fit, "evaluate": _evaluate}
+def _sample_grid(target: Target, out: Attacked, folder: Path) -> str:
+    """One PNG: scene, PSF, sensor image and each restorer's output with its score; its file name."""
+    scores = {r.attack: f"PSNR {r.metrics['psnr_db']:.2f} dB, SSIM {r.metrics['ssim']:.3f}"
+              for r in out.rows if r.kind in ("restorer", "reference") and r.attack == r.restorer and "psnr_db" in r.metrics and "ssim" in r.metrics}
+    def as_hwc(t: torch.Tensor):
+        return t[0].permute(1, 2, 0).clamp(0, 1).numpy()
+    name = f"samples_{target.lens_name}_seed{target.ctx.seed}.png".replace("/", "_")
+    assert target.lens is not None
+    write_sample_grid(folder / name, target.lens_name, target.lens.psf().detach().cpu().numpy(),
+                      as_hwc(target.sharp), as_hwc(target.sensor), {k: as_hwc(v) for k, v in out.restored.items()},
+                      scores)
+    return name
+
+
+def _plate_gallery(target: Target, out: Attacked, reader: str, folder: Path) -> str | None:
+    """The reader's plate gallery over sensor and restored images; its file name (None: nothing to show)."""
+    if reader not in out.reads or not any(readable(pl) for s in target.scenes for pl in s.plates):
+        return None
+    chains = {name: chain_name(name, reader) for name in out.restored if chain_name(name, reader) in out.reads}
+    images = {"sharp": target.sharp, "sensor": target.sensor, **{n: out.restored[n] for n in chains}}
+    reads = {"sensor": out.reads[reader], **{n: out.reads[c] for n, c in chains.items()}}
+    name = f"plates_{target.lens_name}_{reader}_seed{target.ctx.seed}.png".replace("/", "_")
+    write_plate_gallery(images, target.scenes, reads, folder / name)
+    return name
+
+
+_KINDS: dict[str, Callable[[Task, RunConfig, Path], TaskResult]] = {
+    "clean-utility": _clean_utility, "spectrum": _spectrum, "sharp": _sharp, "lens": _lens_task,
+    "utility": _utility, "bound": _bound, "fit": _fit, "evaluate": _evaluate}

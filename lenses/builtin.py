@@ -4,8 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import torch
+
 from lenses.lens import Lens
-from lenses.spec import load_spec
+from lenses.optics import Geometry, pupil_samples_for
+from lenses.spec import LensSpec, load_spec
 
 SPEC_DIR = Path(__file__).parent / "specs"
 
@@ -27,3 +30,25 @@ def defocus(**_: object) -> Lens:
 def random_zernike(**_: object) -> Lens:
     """A seeded random 6-term Zernike mask."""
     return _fixed("random-zernike")
+
+
+class SensorOnlyLens(Lens):
+    """A perfect lens in front of the suite's sensor: the PSF is a delta (K = 1), so the sensor
+    image is the sensor model (tint, RGGB mosaic, noise, quantization, demosaic) applied to
+    the sharp scene itself. A reference: whatever privacy it shows is the sensor's, not a lens's.
+    """
+
+    def __init__(self, spec: LensSpec):
+        # A 1-pixel support keeps the (unused) pupil model tiny; the PSF below does not use it.
+        super().__init__(spec, Geometry(pupil_samples_for(spec, 1), 1, spec.simulation.oversample))
+        self.initial_energy_fraction = torch.ones(3)
+
+    def psf_and_energy(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """Delta PSF (3, 1, 1) of ones and energy fraction (3,) of ones (nothing is lost)."""
+        ones = torch.ones(3, 1, 1, dtype=torch.float32, device=self.coefficients_um.device)
+        return ones, ones.reshape(3)
+
+
+def sensor_only(**_: object) -> Lens:
+    """No blur: only the sensor's tint, mosaic, noise and quantization (a reference lens)."""
+    return SensorOnlyLens(load_spec(SPEC_DIR / "sensor-only.toml"))

@@ -155,6 +155,9 @@ def _optics(t: dict) -> OpticsSpec:
         if not 300.0 <= w <= 1100.0:
             raise LensSpecError(f"optics.wavelengths_nm[{i}] = {w} is not a visible/NIR wavelength in nm (300-1100)")
     material = t.get("mask_material", d.mask_material)
+    if not isinstance(material, str):
+        raise LensSpecError(f"optics.mask_material must be a string naming a material (one of {sorted(MATERIALS)}), "
+                            f"got {type(material).__name__} {material!r}")
     if material not in MATERIALS:
         raise LensSpecError(f"optics.mask_material {material!r} is unknown; known: {sorted(MATERIALS)}")
     if kw["focus_distance_m"] * 1000.0 <= kw["focal_length_mm"]:

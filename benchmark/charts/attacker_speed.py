@@ -10,7 +10,7 @@ import matplotlib.ticker
 from matplotlib.figure import Figure
 
 from benchmark.charts import new_figure, save_figure
-from benchmark.leaderboard import Entry
+from benchmark.leaderboard_entries import Entry
 
 _PANELS = (("psnr_db", 1.0, "PSNR dB against the sharp scene", "Restorers"),
            ("plate_acc", 100.0, "plate accuracy %", "Plate readers and chains"))

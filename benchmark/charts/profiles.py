@@ -8,7 +8,7 @@ from pathlib import Path
 from matplotlib.figure import Figure
 
 from benchmark.charts import new_figure, save_figure
-from benchmark.leaderboard import Entry
+from benchmark.leaderboard_entries import Entry
 
 PROFILE_ORDER = ("smoke", "quick", "paper")
 

@@ -12,7 +12,7 @@ from matplotlib.figure import Figure
 
 from benchmark.charts import new_figure, save_figure
 from benchmark.charts.labels import LABEL_FONT_PT, label_points, line_height_in
-from benchmark.leaderboard import Entry, Stat
+from benchmark.leaderboard_entries import Entry, Stat
 
 _MARKERS = "osD^v<>pP*Xh"
 # Panel geometry in inches: the label column sits right of the axes, outside them.

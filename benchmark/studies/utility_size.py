@@ -18,7 +18,9 @@ import torch
 from benchmark.cache import atomic_write_text, cache_root
 from benchmark.profiles import Profile
 from benchmark.provenance import provenance
-from benchmark.runner import RunConfig, to_tensor, utility_metrics
+from benchmark.run_config import RunConfig
+from benchmark.sensing import to_tensor
+from benchmark.utility.measure import utility_metrics
 from benchmark.scenes import load_scenes
 from lenses.codesign.trainer import pretrain_utility
 

@@ -52,3 +52,29 @@ def test_restorer_contract(name, context):
     assert first.shape == sensor.shape and first.dtype == sensor.dtype
     assert first.min() >= 0 and first.max() <= 1
     assert torch.equal(first, second)
+
+
+@pytest.mark.parametrize("name", REGISTERED)
+def test_reader_contract(name, context):
+    """`read` returns one list of PlateRead per image, boxes of 4 numbers, scores in [0, 1]."""
+    attack = attacks.load(name)
+    if not isinstance(attack, attacks.Reader):
+        pytest.skip(f"{name} is not a reader")
+    # Readers that find vehicles by segmentation get one that calls everything a car (train id 13).
+    def segment(images):
+        return torch.full((images.shape[0], *images.shape[-2:]), 13, dtype=torch.long)
+
+    context = dataclasses.replace(context, extras={"segmenter": segment})
+    if attack.skip_reason(context):
+        pytest.skip(f"{name} does not apply to the fake lens: {attack.skip_reason(context)}")
+    attack.fit(context)
+    images = torch.rand(3, 3, 64, 96, generator=torch.Generator().manual_seed(2))
+    hints = attacks.ReadHints(vehicle_boxes=[[(0.0, 0.0, 96.0, 64.0)]] * 3, segment=segment)
+    with torch.no_grad():
+        reads = attack.read(images, hints)
+    assert isinstance(reads, list) and len(reads) == 3
+    for per_image in reads:
+        assert isinstance(per_image, list)
+        for read in per_image:
+            assert isinstance(read, attacks.PlateRead) and isinstance(read.text, str)
+            assert len(read.box_xyxy) == 4 and 0.0 <= read.score <= 1.0

@@ -8,6 +8,7 @@ import pytest
 import torch
 
 import attacks
+from benchmark.cache import ArtifactCache
 from attacks.degradations import degrade, disk_kernel, gaussian_kernel, motion_kernel, random_kernels
 from attacks.gray_world import gray_world_balance
 from attacks.networks import NAFNet
@@ -48,9 +49,10 @@ def test_degrade_keeps_range_and_shape():
 
 def test_one_model_for_every_lens(fake_lens, make_fake_lens, tmp_path):
     first = attacks.load("nafnet-generic", backend="torch")
-    first.fit(attacks.FitContext(lens=fake_lens, train_pairs=_pairs, cache_dir=tmp_path, seed=0))
+    first.fit(attacks.FitContext(lens=fake_lens, train_pairs=_pairs, artifacts=ArtifactCache(tmp_path), seed=0))
     second = attacks.load("nafnet-generic", backend="torch")
-    second.fit(attacks.FitContext(lens=make_fake_lens(sigma_px=4.0), train_pairs=_pairs, cache_dir=tmp_path, seed=0))
+    second.fit(attacks.FitContext(lens=make_fake_lens(sigma_px=4.0), train_pairs=_pairs,
+                                  artifacts=ArtifactCache(tmp_path), seed=0))
     assert (first.trained, second.trained) == (True, False)
     assert len(list(tmp_path.rglob("*.safetensors"))) == 1
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import torch
 
 import attacks
+from benchmark.cache import ArtifactCache
 from attacks.networks import NAFNet
 from attacks.restorer_training import negative_psnr, random_crops, train_restorer
 
@@ -42,7 +43,7 @@ def test_training_learns_a_gain():
 
 
 def test_second_fit_loads_from_cache(fake_lens, make_fake_lens, tmp_path):
-    ctx = attacks.FitContext(lens=fake_lens, train_pairs=_pairs(), cache_dir=tmp_path, seed=0)
+    ctx = attacks.FitContext(lens=fake_lens, train_pairs=_pairs(), artifacts=ArtifactCache(tmp_path), seed=0)
     first = attacks.load("nafnet-known-pairs", backend="torch")
     first.fit(ctx)
     second = attacks.load("nafnet-known-pairs", backend="torch")
@@ -54,8 +55,9 @@ def test_second_fit_loads_from_cache(fake_lens, make_fake_lens, tmp_path):
     torch.testing.assert_close(first.restore(sensor), second.restore(sensor), atol=0, rtol=0)
     # The key holds the lens: another lens, or another seed, trains its own model.
     other = attacks.load("nafnet-known-pairs", backend="torch")
-    other.fit(attacks.FitContext(lens=make_fake_lens(sigma_px=3.0), train_pairs=_pairs(), cache_dir=tmp_path, seed=0))
+    other.fit(attacks.FitContext(lens=make_fake_lens(sigma_px=3.0), train_pairs=_pairs(),
+                                 artifacts=ArtifactCache(tmp_path), seed=0))
     reseeded = attacks.load("nafnet-known-pairs", backend="torch")
-    reseeded.fit(attacks.FitContext(lens=fake_lens, train_pairs=_pairs(), cache_dir=tmp_path, seed=1))
+    reseeded.fit(attacks.FitContext(lens=fake_lens, train_pairs=_pairs(), artifacts=ArtifactCache(tmp_path), seed=1))
     assert other.trained and reseeded.trained
     assert len(list(tmp_path.rglob("*.safetensors"))) == 3

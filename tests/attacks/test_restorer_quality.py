@@ -20,7 +20,9 @@ import attacks
 import lenses
 from benchmark.metrics import finite_mean, psnr
 from benchmark.profiles import PROFILES
-from benchmark.runner import RunConfig, sense, to_tensor, train_pairs_factory
+from benchmark.cache import ArtifactCache
+from benchmark.run_config import RunConfig
+from benchmark.sensing import sense, to_tensor, train_pairs_factory
 from benchmark.scenes import load_scenes
 
 PROFILE = PROFILES["smoke"]
@@ -42,8 +44,8 @@ def psnr_by_lens(scenes, tmp_path_factory) -> dict[str, dict[str, float]]:
     for lens_name in ("ideal", "defocus"):
         lens = lenses.load(lens_name)
         sensor = sense(lens, scenes, PROFILE.batch_size, 0, "cpu")
-        ctx = attacks.FitContext(lens=lens, train_pairs=train_pairs_factory(lens, cfg, 0), cache_dir=cache,
-                                 seed=0, profile=PROFILE)
+        ctx = attacks.FitContext(lens=lens, train_pairs=train_pairs_factory(lens, cfg, 0),
+                                 artifacts=ArtifactCache(cache), seed=0, profile=PROFILE)
         results[lens_name] = {}
         for name in ["identity", *RESTORERS]:
             # The torch backend: ONNX export and timing cost time here and are tested elsewhere.

@@ -32,6 +32,7 @@ def test_beats_identity_on_blurred_noisy_photo(astronaut, make_gaussian_psf, mak
     wiener = attacks.load("wiener-known-psf")
     wiener.fit(attacks.FitContext(lens=lens))
     identity = attacks.load("identity")
+    identity.fit(attacks.FitContext(lens=lens))
     assert psnr_db(wiener.restore(sensor), x) > psnr_db(identity.restore(sensor), x) + 2.0
 
 

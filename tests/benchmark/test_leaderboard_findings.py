@@ -1,6 +1,6 @@
 """The paper's findings table is computed from the entries: its verdicts follow the numbers."""
 
-from benchmark.leaderboard import make_entry
+from benchmark.leaderboard_entries import make_entry
 from benchmark.leaderboard_tables import findings_table
 from benchmark.schema import Row
 

@@ -4,8 +4,8 @@ import json
 
 import pytest
 
-from benchmark import leaderboard
-from benchmark.leaderboard import Entry
+from benchmark import leaderboard, leaderboard_entries
+from benchmark.leaderboard_entries import Entry
 from benchmark.schema import Row
 
 PROFILE = {"name": "smoke", "n_val": 4, "image_size": (128, 256)}  # a tuple, as Profile.to_dict() gives
@@ -56,18 +56,18 @@ def test_more_seeds_for_some_attackers_keep_the_others_with_their_seeds(tmp_path
 def test_seeds_with_nothing_to_score_leave_mean_and_std_finite():
     rows = [Row(kind="reader", lens="x", attack="lpdr", reader="lpdr", seed=s, profile="smoke", scenes="synthetic",
                 metrics={} if v is None else {"plate_acc": v}) for s, v in enumerate([0.5, None, 0.25])]
-    entry = leaderboard.make_entry("x", rows, PROFILE, None, None)
+    entry = leaderboard_entries.make_entry("x", rows, PROFILE, None, None)
     stats = entry.metric("lpdr", "plate_acc")
     assert stats.mean == 0.375 and stats.std == pytest.approx(0.1767767, rel=1e-6)
     assert stats.values == (0.5, None, 0.25)
-    assert leaderboard.make_entry("x", rows[:2], PROFILE, None, None).metric("lpdr", "plate_acc").std == 0.0
+    assert leaderboard_entries.make_entry("x", rows[:2], PROFILE, None, None).metric("lpdr", "plate_acc").std == 0.0
 
 
 def test_intervals_of_the_seeds_are_enveloped():
     rows = _rows(["identity"], "aaa", seeds=(0, 1))
     rows[0].set_interval("psnr_db", 0.5, 1.5, "bootstrap")
     rows[1].set_interval("psnr_db", 1.8, 2.4, "bootstrap")
-    assert leaderboard.make_entry("sharp", rows, PROFILE, None, None).metric("identity", "psnr_db").interval == (0.5, 2.4)
+    assert leaderboard_entries.make_entry("sharp", rows, PROFILE, None, None).metric("identity", "psnr_db").interval == (0.5, 2.4)
 
 
 V1_ENTRY = {
@@ -91,9 +91,9 @@ V1_ENTRY = {
 
 
 def test_version_1_entries_migrate_without_loss(tmp_path):
-    migrated = leaderboard.migrate_entry(V1_ENTRY)
+    migrated = leaderboard_entries.migrate_entry(V1_ENTRY)
     entry = Entry.from_json(migrated)
-    assert migrated["entry_version"] == leaderboard.ENTRY_VERSION == 2
+    assert migrated["entry_version"] == leaderboard_entries.ENTRY_VERSION == 2
     kinds = {c.attack: c.kind for c in entry.chains()}
     # lpdr's seed 1 had no readable plate (no plate_acc) and is still a reader's row.
     assert kinds == {"utility": "utility", "bound": "bound", "lpdr": "reader", "wiener-known-psf>lpdr": "chain"}
@@ -111,9 +111,9 @@ def test_version_1_entries_migrate_without_loss(tmp_path):
     (tmp_path / "entries").mkdir()
     path = tmp_path / "entries" / "gp__quick__synthetic.json"
     path.write_text(json.dumps(V1_ENTRY))
-    assert leaderboard.load_entries(tmp_path)[0].to_json() == entry.to_json()
-    assert leaderboard.migrate_directory(tmp_path) == [path]
-    assert json.loads(path.read_text())["entry_version"] == 2 and leaderboard.migrate_directory(tmp_path) == []
+    assert leaderboard_entries.load_entries(tmp_path)[0].to_json() == entry.to_json()
+    assert leaderboard_entries.migrate_directory(tmp_path) == [path]
+    assert json.loads(path.read_text())["entry_version"] == 2 and leaderboard_entries.migrate_directory(tmp_path) == []
 
 
 def test_unknown_versions_are_named(tmp_path):

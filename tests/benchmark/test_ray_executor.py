@@ -1,12 +1,13 @@
 """The Ray executor gives the local executor's results, also when a worker dies mid-grid."""
 
-import json
 import os
 import subprocess
 import sys
 import textwrap
 
 import pytest
+
+from benchmark.schema import read_results
 
 pytest.importorskip("ray", reason='the Ray executor is an optional extra: pip install ".[ray]"')
 
@@ -22,7 +23,8 @@ def run(out, cache, executor, lenses=("ideal", "defocus"), seeds="0,1", extra=()
         args += ["--lens", lens]
     proc = subprocess.run(args, capture_output=True, text=True, timeout=900, env=env)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    return json.loads((out / "results.json").read_text())["rows"]
+    return [r.flat() | {f"interval_{k}": v for k, v in r.intervals.items()}
+            for r in read_results(out / "results.json").rows]
 
 
 def same(a, b):
@@ -71,4 +73,4 @@ def test_grid_survives_a_killed_worker(tmp_path):
     tasks = tmp_path / "cache-ray" / "tasks"
     leftovers = [p for p in tasks.rglob("*") if ".staging-" in p.name]
     assert not leftovers, leftovers
-    assert all((d / "result.json").is_file() for run_dir in tasks.iterdir() for d in run_dir.iterdir())
+    assert all((d / "result.json").is_file() for run_dir in tasks.iterdir() for d in run_dir.iterdir() if d.is_dir())

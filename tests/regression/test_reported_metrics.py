@@ -14,8 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from benchmark import leaderboard, leaderboard_report
-from benchmark.leaderboard import Entry
+from benchmark import leaderboard_entries as leaderboard
+from benchmark import leaderboard_report
+from benchmark.leaderboard_entries import Entry
 from benchmark.schema import Row, read_results
 
 ENTRIES = leaderboard.LEADERBOARD / "entries"

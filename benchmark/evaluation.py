@@ -1,0 +1,213 @@
+"""Attack one lens: restore with every restorer, read with every reader on the sensor image and on
+each restorer's output, and score everything the same way.
+
+An attacker that raises, or returns the wrong shape, dtype, range or non-finite values, gives a
+failed row (attacker, stage, message) and never a metric; the other attackers' rows are complete.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TypeVar
+
+import torch
+
+import attacks
+import lenses
+from benchmark.intervals import plate_intervals, scene_intervals
+from benchmark.metrics import psnr, ssim
+from benchmark.plate_scoring import PlateOutcome, score_scene, summarise
+from benchmark.rows import RowBuilder
+from benchmark.run_config import RunConfig
+from benchmark.scenes import Scene
+from benchmark.schema import Row, RowError, chain_name
+from benchmark.sensing import batches
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+
+# How far outside [0, 1] a restored image may stray (float rounding of a clamp-free network).
+RANGE_TOLERANCE = 1e-4
+
+
+class OutputError(ValueError):
+    """An attacker returned something other than what its contract promises."""
+
+
+def attempt(attacker: str, stage: str, work: Callable[[], T]) -> T | RowError:
+    """Run `work`; any exception becomes the RowError of `attacker` at `stage` (and is logged)."""
+    try:
+        return work()
+    except Exception as exc:  # noqa: BLE001 - a broken plugin must not take the run down
+        log.warning("attacker %r failed at %s: %s: %s", attacker, stage, type(exc).__name__, exc)
+        return RowError(attacker, stage, f"{type(exc).__name__}: {exc}")
+
+
+def check_restored(name: str, out: object, sensor: torch.Tensor) -> torch.Tensor:
+    """`out` if it is a finite float tensor shaped like `sensor` with values in [0, 1], else OutputError."""
+    if not isinstance(out, torch.Tensor):
+        raise OutputError(f"{name}.restore returned {type(out).__name__}, not a tensor")
+    if out.shape != sensor.shape:
+        raise OutputError(f"{name}.restore returned shape {tuple(out.shape)} for input {tuple(sensor.shape)}")
+    if not out.is_floating_point():
+        raise OutputError(f"{name}.restore returned dtype {out.dtype}; expected a float tensor")
+    if not bool(torch.isfinite(out).all()):
+        bad = int((~torch.isfinite(out)).sum())
+        raise OutputError(f"{name}.restore returned {bad} non-finite value(s) (NaN/inf)")
+    low, high = float(out.min()), float(out.max())
+    if low < -RANGE_TOLERANCE or high > 1 + RANGE_TOLERANCE:
+        raise OutputError(f"{name}.restore returned values in [{low:.4g}, {high:.4g}]; expected [0, 1]")
+    return out.float().clamp(0, 1)
+
+
+def check_reads(name: str, reads: object, n_images: int) -> list[list[attacks.PlateRead]]:
+    """`reads` if it is one list of PlateRead per image, else OutputError."""
+    if not isinstance(reads, list) or len(reads) != n_images:
+        got = f"a list of {len(reads)}" if isinstance(reads, list) else type(reads).__name__
+        raise OutputError(f"{name}.read returned {got} for {n_images} image(s); expected one list per image")
+    for per_image in reads:
+        if not isinstance(per_image, list) or not all(isinstance(r, attacks.PlateRead) for r in per_image):
+            raise OutputError(f"{name}.read must return lists of attacks.PlateRead, got {per_image!r:.120}")
+    return reads
+
+
+def restore_all(attacker: attacks.Restorer, sensor: torch.Tensor, batch_size: int, device: str) -> torch.Tensor:
+    """The attacker's restorations of every sensor image (N,3,H,W), checked, on the CPU."""
+    outs = []
+    with torch.no_grad():
+        for b in batches(sensor, batch_size):
+            outs.append(check_restored(attacker.name, attacker.restore(b.to(device)), b.to(device)).cpu())
+    return torch.cat(outs)
+
+
+def restoration_metrics(restored: torch.Tensor, sharp: torch.Tensor) -> tuple[dict[str, float], dict[str, list[float]]]:
+    """Mean PSNR (dB) and SSIM of restored vs sharp (N,3,H,W), n_images; and the per-image values.
+
+    A per-image PSNR is infinite only for an exact copy; the mean is then left out, never inf.
+    """
+    per_image = {"psnr_db": psnr(restored, sharp).tolist(), "ssim": ssim(restored, sharp).tolist()}
+    metrics = {"n_images": float(sharp.shape[0])}
+    for name, values in per_image.items():
+        if all(torch.isfinite(torch.tensor(values))):
+            metrics[name] = float(torch.tensor(values, dtype=torch.float64).mean())
+    return metrics, per_image
+
+
+def read_plates(reader: attacks.Reader, images: torch.Tensor, scenes: list[Scene], batch_size: int,
+                device: str, segment: Callable[[torch.Tensor], torch.Tensor] | None = None
+                ) -> tuple[list[PlateOutcome], dict[str, float], list[list[attacks.PlateRead]]]:
+    """Run a reader over images (N,3,H,W) batch-wise and score it against the scenes' plates.
+
+    Returns the per-plate outcomes, the timing (``images_per_s``, and ``<stage>_s_per_image`` for
+    readers that keep ``stage_seconds``, like lpdr) and the reads per image.
+    """
+    outcomes: list[PlateOutcome] = []
+    all_reads: list[list[attacks.PlateRead]] = []
+    stages_before = dict(getattr(reader, "stage_seconds", {}))
+    t0 = time.perf_counter()
+    for start in range(0, images.shape[0], batch_size):
+        chunk = scenes[start:start + batch_size]
+        hints = attacks.ReadHints(vehicle_boxes=[[v.box_xyxy for v in s.vehicles] for s in chunk], segment=segment)
+        with torch.no_grad():
+            reads = check_reads(reader.name, reader.read(images[start:start + batch_size].to(device), hints),
+                                len(chunk))
+        for r, scene in zip(reads, chunk):
+            outcomes.extend(score_scene(r, scene))
+        all_reads.extend(reads)
+    timing = {"images_per_s": images.shape[0] / (time.perf_counter() - t0)}
+    for stage, seconds in getattr(reader, "stage_seconds", {}).items():
+        timing[f"{stage}_s_per_image"] = (seconds - stages_before.get(stage, 0.0)) / images.shape[0]
+    return outcomes, timing, all_reads
+
+
+@dataclass
+class Target:
+    """What the attackers of one lens and seed see: sharp scenes, sensor images and the fit context."""
+
+    lens_name: str
+    scenes: list[Scene]
+    sharp: torch.Tensor                 # (N,3,H,W) in [0,1]
+    sensor: torch.Tensor                # (N,3,H,W) in [0,1]; the sharp scenes themselves for lens `sharp`
+    ctx: attacks.FitContext
+    segment_sensor: Callable[[torch.Tensor], torch.Tensor] | None   # lens's own net on sensor images
+    segment_restored: Callable[[torch.Tensor], torch.Tensor] | None  # clean net on restored images
+    lens: lenses.Lens | None = None
+
+
+@dataclass
+class Attacked:
+    """Rows, per-plate records and restored images of one lens and seed."""
+
+    rows: list[Row] = field(default_factory=list)
+    plates: list[dict] = field(default_factory=list)
+    restored: dict[str, torch.Tensor] = field(default_factory=dict)
+    reads: dict[str, list[list[attacks.PlateRead]]] = field(default_factory=dict)
+    described: dict[str, dict] = field(default_factory=dict)  # restorer name -> describe()
+    references: set[str] = field(default_factory=set)          # restorers marked `reference`
+
+
+def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dict[str, dict], cfg: RunConfig,
+                  rows: RowBuilder, out: Attacked) -> None:
+    """Restore with each restorer (fitted by its own task: `fitted[name]` = that task's meta) and score it."""
+    for attacker in restorers:
+        # A reference (e.g. the uncorrected image) is reported, but never as an attack.
+        kind = "reference" if getattr(attacker, "reference", False) else "restorer"
+        settings = {"restorer": attacker.describe()}
+        meta = fitted.get(attacker.name, {})
+        if "skipped" in meta:
+            log.info("%s on %s skipped: %s", attacker.name, target.lens_name, meta["skipped"])
+            continue
+        if "error" in meta:
+            out.rows.append(rows.failed(kind, attacker.name, RowError(**meta["error"]), restorer=attacker.name,
+                                        settings=settings))
+            continue
+        error = attempt(attacker.name, "fit", lambda: attacker.fit(target.ctx))  # a cache hit after the fit task
+        t0 = time.perf_counter()
+        restored = error if isinstance(error, RowError) else attempt(
+            attacker.name, "restore", lambda: restore_all(attacker, target.sensor, cfg.profile.batch_size, cfg.device))
+        if isinstance(restored, RowError):
+            out.rows.append(rows.failed(kind, attacker.name, restored, restorer=attacker.name, settings=settings))
+            continue
+        run_s = time.perf_counter() - t0
+        out.restored[attacker.name] = restored
+        out.described[attacker.name] = attacker.describe()
+        if kind == "reference":
+            out.references.add(attacker.name)
+        metrics, per_image = restoration_metrics(restored, target.sharp)
+        metrics.update({"fit_s": float(meta.get("fit_s", 0.0)), "images_per_s": target.sharp.shape[0] / run_s})
+        row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
+                       threat_model=attacker.threat_model.value, settings={"restorer": attacker.describe()})
+        scene_intervals(row, per_image, seed=row.seed)
+        out.rows.append(row)
+
+
+def run_reader(target: Target, reader: attacks.Reader, cfg: RunConfig, rows: RowBuilder, out: Attacked) -> None:
+    """Read with `reader` on the sensor images and on every restored set; score each chain."""
+    sources = {reader.name: (None, target.sensor),
+               **{chain_name(name, reader.name): (name, images) for name, images in out.restored.items()}}
+    fit_error = attempt(reader.name, "fit", lambda: reader.fit(target.ctx))
+    for chain, (restorer, images) in sources.items():
+        kind = "reader" if restorer is None else "reference" if restorer in out.references else "chain"
+        settings = {"reader": reader.describe(), **({"restorer": out.described[restorer]} if restorer else {})}
+        if isinstance(fit_error, RowError):
+            out.rows.append(rows.failed(kind, chain, fit_error, restorer=restorer, reader=reader.name,
+                                        settings=settings))
+            continue
+        # The attacker with device access segments sensor images with the lens's own network,
+        # restored images with the clean one.
+        segment = target.segment_sensor if restorer is None else target.segment_restored
+        result = attempt(reader.name, "read", lambda: read_plates(reader, images, target.scenes,
+                                                                   cfg.profile.batch_size, cfg.device, segment))
+        if isinstance(result, RowError):
+            out.rows.append(rows.failed(kind, chain, result, restorer=restorer, reader=reader.name, settings=settings))
+            continue
+        outcomes, timing, out.reads[chain] = result
+        row = rows.row(kind, {**summarise(outcomes), **timing}, attack=chain, restorer=restorer, reader=reader.name,
+                       threat_model=reader.threat_model.value, settings=settings)
+        plate_intervals(row, outcomes)
+        out.rows.append(row)
+        out.plates.extend({"lens": target.lens_name, "attack": chain, "seed": row.seed, **o.__dict__}
+                          for o in outcomes)

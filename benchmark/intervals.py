@@ -1,0 +1,67 @@
+"""The 95 % intervals attached to rows: Wilson for plate proportions, a scene bootstrap for means.
+
+Scenes are the independent units: restoration scores are bootstrapped over per-scene values,
+segmentation scores (pooled confusion matrices, not means) by resampling whole scenes and
+recomputing the pooled score. The interval functions themselves are `benchmark.stats`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from benchmark import stats
+from benchmark.plate_scoring import PlateOutcome
+from benchmark.schema import Row
+from benchmark.utility.scoring import scores
+
+N_RESAMPLES = 2000
+
+
+def plate_intervals(row: Row, outcomes: Sequence[PlateOutcome]) -> None:
+    """Wilson intervals of plate_acc and plate_det, scene-bootstrap interval of plate_cer."""
+    n = len(outcomes)
+    if n == 0:
+        return
+    for name, hits in (("plate_acc", sum(o.correct for o in outcomes)), ("plate_det", sum(o.detected for o in outcomes))):
+        if name in row.metrics:
+            row.set_interval(name, *stats.wilson_interval(int(hits), n), "wilson")
+    if "plate_cer" in row.metrics:
+        by_scene: dict[str, list[float]] = {}
+        for o in outcomes:
+            by_scene.setdefault(o.scene, []).append(o.cer)
+        # CER is a mean over plates; scenes are resampled with their plates.
+        low, high = _pooled_bootstrap([np.array([sum(v), len(v)]) for v in by_scene.values()],
+                                      lambda s: float(s[0] / s[1]), row.seed)
+        row.set_interval("plate_cer", low, high, "bootstrap")
+
+
+def scene_intervals(row: Row, per_image: dict[str, Sequence[float]], seed: int) -> None:
+    """Scene-bootstrap intervals of the row's metrics that are means of `per_image` values."""
+    for name, values in per_image.items():
+        if name in row.metrics and len(values) > 0 and all(np.isfinite(values)):
+            row.set_interval(name, *stats.bootstrap_mean_interval(list(values), n_resamples=N_RESAMPLES, seed=seed),
+                             "bootstrap")
+
+
+def utility_intervals(row: Row, per_scene_confusion: torch.Tensor) -> None:
+    """Scene-bootstrap intervals of miou, mean_acc and overall_acc from (N, C, C) confusion matrices."""
+    parts = [c.double().numpy() for c in per_scene_confusion]
+    for name in ("miou", "mean_acc", "overall_acc"):
+        if name in row.metrics and parts:
+            low, high = _pooled_bootstrap(parts, lambda conf, n=name: float(scores(torch.from_numpy(conf))[n]),
+                                          row.seed)
+            row.set_interval(name, low, high, "bootstrap")
+
+
+def _pooled_bootstrap(parts: list[np.ndarray], statistic, seed: int) -> tuple[float, float]:
+    """Percentile interval (95 %) of statistic(sum of parts) over scenes resampled with replacement."""
+    stacked = np.stack(parts)
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, len(parts), size=(N_RESAMPLES, len(parts)))
+    values = np.array([statistic(stacked[d].sum(axis=0)) for d in draws])
+    values = values[np.isfinite(values)]
+    low, high = np.quantile(values, [0.025, 0.975])
+    return float(min(low, high)), float(max(low, high))

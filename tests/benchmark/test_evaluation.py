@@ -1,0 +1,68 @@
+"""Attackers' outputs are checked before scoring: nothing non-finite, mis-shaped or out of range is scored."""
+
+import math
+import re
+
+import pytest
+import torch
+
+import attacks
+from benchmark.evaluation import OutputError, attempt, check_reads, check_restored, restoration_metrics
+from benchmark.metrics import finite_mean
+from benchmark.schema import RowError
+
+SENSOR = torch.rand(2, 3, 24, 32, generator=torch.Generator().manual_seed(0))
+
+
+@pytest.mark.parametrize("out, text", [
+    (SENSOR[..., :-1], "shape (2, 3, 24, 31)"),
+    (torch.full_like(SENSOR, math.nan), "non-finite"),
+    (torch.full_like(SENSOR, math.inf), "non-finite"),
+    (SENSOR * 3, "values in"),
+    ((SENSOR * 255).to(torch.uint8), "dtype"),
+    (SENSOR.numpy(), "not a tensor"),
+])
+def test_bad_restorer_outputs_are_refused_naming_the_attacker(out, text):
+    with pytest.raises(OutputError, match=re.escape(text)) as info:
+        check_restored("median3", out, SENSOR)
+    assert "median3" in str(info.value)
+
+
+def test_a_good_output_passes_unchanged():
+    assert torch.equal(check_restored("x", SENSOR, SENSOR), SENSOR)
+
+
+@pytest.mark.parametrize("reads, text", [
+    ([[]], "a list of 1 for 2"),
+    ([[], ["ABC"]], "PlateRead"),
+    ({"a": 1}, "dict"),
+])
+def test_bad_reader_outputs_are_refused(reads, text):
+    with pytest.raises(OutputError, match=re.escape(text)):
+        check_reads("echo", reads, 2)
+
+
+def test_good_reads_pass():
+    reads = [[], [attacks.PlateRead("AB12", (0.0, 0.0, 4.0, 2.0), 0.9)]]
+    assert check_reads("echo", reads, 2) is reads
+
+
+def test_an_exception_becomes_the_error_of_a_failed_row():
+    def boom():
+        raise RuntimeError("exploded")
+
+    error = attempt("x", "fit", boom)
+    assert error == RowError("x", "fit", "RuntimeError: exploded")
+    assert attempt("x", "fit", lambda: 3) == 3
+
+
+def test_an_exact_copy_has_no_psnr_mean_rather_than_inf():
+    metrics, per_image = restoration_metrics(SENSOR, SENSOR)
+    assert "psnr_db" not in metrics and metrics["ssim"] == pytest.approx(1.0)
+    assert per_image["psnr_db"] == [math.inf, math.inf]
+
+
+def test_finite_mean_never_turns_nan_into_a_score():
+    with pytest.raises(ValueError, match="NaN"):
+        finite_mean(torch.tensor([20.0, math.nan]))
+    assert finite_mean(torch.tensor([20.0, 30.0])) == 25.0
