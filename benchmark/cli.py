@@ -76,7 +76,8 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="render leaderboard/README.md and charts from leaderboard/entries/")
     rep.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
     rep.add_argument("--migrate", action="store_true",
-                     help="first rewrite stored entries of an older format in the current one (leaderboard_entries.ENTRY_VERSION)")
+                     help="first rewrite stored entries of an older format in the current one "
+                          "(leaderboard_entries.ENTRY_VERSION)")
     mask = sub.add_parser("export-mask", help="write a lens's phase mask as a height map (um) a fab or Zemax can read")
     mask.add_argument("lens", metavar="LENS",
                       help="registered lens name, a .toml spec, or a leaderboard entry .json (its published mask)")

@@ -67,7 +67,8 @@ def test_intervals_of_the_seeds_are_enveloped():
     rows = _rows(["identity"], "aaa", seeds=(0, 1))
     rows[0].set_interval("psnr_db", 0.5, 1.5, "bootstrap")
     rows[1].set_interval("psnr_db", 1.8, 2.4, "bootstrap")
-    assert leaderboard_entries.make_entry("sharp", rows, PROFILE, None, None).metric("identity", "psnr_db").interval == (0.5, 2.4)
+    entry = leaderboard_entries.make_entry("sharp", rows, PROFILE, None, None)
+    assert entry.metric("identity", "psnr_db").interval == (0.5, 2.4)
 
 
 V1_ENTRY = {
@@ -83,7 +84,8 @@ V1_ENTRY = {
             "bound_width_eps_t1": {"mean": 40.0, "std": 0.0, "values": [40.0]}}},
         {"attack": "lpdr", "seeds": [0, 1], "threat_model": "sensor-access", "metrics": {
             "plate_acc": {"mean": 0.5, "std": 0.0, "values": [0.5, None]}},
-         "provenance": {"git_commit": "old", "date": "e", "device": "cpu", "packages": "p", "python": "3", "threads": 2}},
+         "provenance": {"git_commit": "old", "date": "e", "device": "cpu", "packages": "p", "python": "3",
+                        "threads": 2}},
         {"attack": "wiener-known-psf>lpdr", "seeds": [0], "threat_model": "sensor-access", "metrics": {
             "plate_acc": {"mean": 0.1, "std": 0.0, "values": [0.1]}}},
     ],
@@ -100,7 +102,8 @@ def test_version_1_entries_migrate_without_loss(tmp_path):
     utility = entry.chain("utility")
     assert [r.metrics for r in utility.rows] == [{"miou": 0.2}, {"miou": 0.3}]
     assert [r.provenance["wall_s"] for r in utility.rows] == [2.0, 2.0]
-    assert entry.metric("utility", "miou").mean == 0.25 and entry.metric("utility", "miou").std == pytest.approx(0.0707107)
+    miou = entry.metric("utility", "miou")
+    assert miou.mean == 0.25 and miou.std == pytest.approx(0.0707107)
     assert entry.chain("bound").notes == {"bound_assumptions": "a, b"}
     lpdr = entry.chain("lpdr")
     assert lpdr.seeds == (0, 1) and lpdr.metrics["plate_acc"].values == (0.5, None)
