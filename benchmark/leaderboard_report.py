@@ -52,7 +52,10 @@ def entry_charts(entries: list[Entry], charts: Path) -> list[Path]:
 def readme_text(entries: list[Entry], charts: list[Path], pictures: list[Path]) -> str:
     """The leaderboard README: tables, then the charts and the published pictures (paths relative)."""
     findings = findings_table(entries)
-    text = ["# Leaderboard", "", INTRO, "", "## Utility against privacy", "", main_table(entries), "",
+    text = ["# Leaderboard", "", INTRO, "",
+            "The same tables, sortable and filterable by profile, scenes and threat model, with interactive "
+            "charts: [index.html](index.html) (a self-contained page; open it from disk).", "",
+            "## Utility against privacy", "", main_table(entries), "",
             *(["## The paper's findings on these entries", "", findings, ""] if findings else []),
             "## Every attacker", "", attacker_table(entries), "", "## Charts", ""]
     text += [f"![{p.stem}](charts/{p.name})" for p in charts]
