@@ -42,7 +42,11 @@ def _device(text: str) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     from benchmark.profiles import PROFILES
+    from lenses.mask_export import FORMATS as MASK_FORMATS
     parser = argparse.ArgumentParser(prog="python -m benchmark", description=__doc__)
+    loudness = parser.add_mutually_exclusive_group()
+    loudness.add_argument("-v", "--verbose", action="store_true", help="log debug messages too")
+    loudness.add_argument("-q", "--quiet", action="store_true", help="log warnings and errors only")
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="push scenes through lenses, attack the sensor images, write a table")
     run.add_argument("--lens", action="append", required=True, metavar="NAME|SPEC.toml",
@@ -71,6 +75,20 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("list", help="list registered lenses, attackers and scene sets")
     rep = sub.add_parser("report", help="render leaderboard/README.md and charts from leaderboard/entries/")
     rep.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
+    rep.add_argument("--migrate", action="store_true",
+                     help="first rewrite stored entries of an older format in the current one "
+                          "(leaderboard_entries.ENTRY_VERSION)")
+    mask = sub.add_parser("export-mask", help="write a lens's phase mask as a height map (um) a fab or Zemax can read")
+    mask.add_argument("lens", metavar="LENS",
+                      help="registered lens name, a .toml spec, or a leaderboard entry .json (its published mask)")
+    mask.add_argument("--format", required=True, choices=list(MASK_FORMATS), dest="fmt",
+                      help="npy (float64), tiff (32-bit float), zemax-gridsag (OpticStudio Grid Sag .DAT, mm), "
+                           "csv (x_mm, y_mm, height_um); metadata in PATH.json beside it")
+    mask.add_argument("--out", type=Path, required=True, metavar="PATH", help="file to write")
+    mask.add_argument("--samples", type=int, default=257, help="grid nodes per side across the aperture (default 257)")
+    mask.add_argument("--profile", default="quick", choices=list(PROFILES),
+                      help="a co-designed lens's training profile (default: quick)")
+    mask.add_argument("--seed", type=int, default=0, help="a co-designed lens's training seed (default 0)")
     study = sub.add_parser("study", help="measure a modelling-choice study into leaderboard/studies/ and re-render")
     study.add_argument("name", choices=["psf-grid", "utility-size"],
                        help="psf-grid: PSF support, pupil grid, oversampling vs error and time; "
@@ -179,7 +197,10 @@ def cmd_run(args: argparse.Namespace) -> int:
             "wall_s": time.perf_counter() - t0}
     write_run_outputs(out, result, meta)
     if args.publish:
-        publish_run(result, profile, out)
+        from benchmark import leaderboard
+        paths = leaderboard.publish_run(result.rows, profile.to_dict(), result.lens_info, out,
+                                        settings=result.settings)
+        print(f"published {len(paths)} leaderboard entries; rendered the leaderboard")
     print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({meta['wall_s']:.1f} s)")
     return report_failures(result.failed)
 
@@ -187,13 +208,15 @@ def cmd_run(args: argparse.Namespace) -> int:
 def write_run_outputs(out: Path, result, meta: dict) -> None:
     """results.json (schema rows + their settings), tables, pictures and charts of a run."""
     from benchmark import report
-    from benchmark.schema import Results, ok_rows, write_results
+    from benchmark.charts.run_charts import write_run_charts
+    from benchmark.schema import Results, write_results
     write_results(out / "results.json", Results(result.rows, result.settings, meta))
     for picture in result.pictures:
         shutil.copyfile(picture, out / picture.name)
-    flat = [r.flat() for r in ok_rows(result.rows)]
-    write_charts(out, flat, result.plates, result.bound_curves)
-    report.write_tables(out, flat)
+    if result.plates:
+        report.write_plate_records(out, result.plates)
+    write_run_charts(out, result.rows, result.plates, result.bound_curves)
+    report.write_tables(out, result.rows)
     print((out / "table.md").read_text())
 
 
@@ -210,70 +233,29 @@ def report_failures(failed: list) -> int:
     return 1
 
 
-def write_charts(out: Path, rows: list[dict], plates: list[dict], bound_curves: dict[str, tuple]) -> None:
-    """The run's charts: restorer speed vs PSNR, plate accuracy vs width (with the bound), the bound."""
-    from benchmark import report
-    from benchmark.charts.bound import write_bound_chart
-    from benchmark.charts.plates import write_plate_width_chart
-    from benchmark.charts.restorers import restorer_points, write_restorer_speed_chart
-    if restorer_points(rows):
-        write_restorer_speed_chart(rows, out / "restorers_speed_vs_psnr.png")
-    if plates:
-        report.write_plate_records(out, plates)
-        write_plate_width_chart(plates, out / "plate_accuracy_vs_width.png", ceilings=bound_curves)
-    if bound_curves:
-        write_bound_chart(bound_curves, out / "bound_ceiling_vs_width.png")
-
-
-def publish_run(result, profile, out: Path) -> None:
-    from benchmark import leaderboard, leaderboard_report
-    from benchmark.schema import ok_rows
-    # The leaderboard reads version-1 rows until it reads the schema (config_hash = settings hash).
-    rows = [{**r.flat(), "config_hash": r.settings_hash} for r in ok_rows(result.rows)]
-    lens_info = result.lens_info
-    paths = leaderboard.publish(rows, profile.to_dict(), lens_info)
-    samples = leaderboard.LEADERBOARD / "samples"
-    samples.mkdir(parents=True, exist_ok=True)
-    copy_run_pictures(out, list(lens_info), profile.name, samples)
-    leaderboard_report.render()
-    leaderboard_report.update_readme(leaderboard.LEADERBOARD.parent / "README.md")
-    print(f"published {len(paths)} leaderboard entries; rendered {leaderboard.LEADERBOARD / 'README.md'}")
-
-
-def copy_run_pictures(out: Path, lens_names: list[str], profile: str, samples: Path) -> list[Path]:
-    """Copy a published run's pictures into the leaderboard: each lens's first sample grid, and the
-    run's plate-accuracy-vs-width chart (named after the run's lenses: one chart per published run)."""
-    copied = []
-    for name in lens_names:
-        first = sorted(out.glob(f"samples_{name}_seed*.png"))
-        if first:
-            copied.append(Path(shutil.copyfile(first[0], samples / f"{name}__{profile}.png")))
-    chart = out / "plate_accuracy_vs_width.png"
-    if chart.is_file():
-        copied.append(Path(shutil.copyfile(chart, samples / f"plate_width__{profile}__{'+'.join(lens_names)}.png")))
-    return copied
-
-
 def cmd_report(args: argparse.Namespace) -> int:
-    from benchmark import leaderboard, leaderboard_report
-    directory = args.dir or leaderboard.LEADERBOARD
+    from benchmark import leaderboard_entries, leaderboard_report
+    directory = args.dir or leaderboard_entries.LEADERBOARD
     if not (directory / "entries").is_dir():
         raise ValueError(f"no leaderboard entries in {directory / 'entries'}; publish some with "
                          "`python -m benchmark run --lens NAME --publish`")
+    if args.migrate:
+        for path in leaderboard_entries.migrate_directory(directory):
+            print(f"migrated {path} to entry format {leaderboard_entries.ENTRY_VERSION}")
     for path in leaderboard_report.render(directory):
         print(f"wrote {path}")
-    if args.dir is None and leaderboard_report.update_readme(leaderboard.LEADERBOARD.parent / "README.md"):
+    if args.dir is None and leaderboard_report.update_readme(leaderboard_entries.LEADERBOARD.parent / "README.md"):
         print("updated the results table of README.md")
     return 0
 
 
 def cmd_study(args: argparse.Namespace) -> int:
-    from benchmark import leaderboard, leaderboard_report
+    from benchmark import leaderboard_entries, leaderboard_report
     from benchmark.profiles import get_profile
     from benchmark.sensing import to_tensor
     from benchmark.scenes.loading import load_scene
     from benchmark.studies import psf_grid, utility_size
-    directory = args.dir or leaderboard.LEADERBOARD
+    directory = args.dir or leaderboard_entries.LEADERBOARD
     t0 = time.perf_counter()
     if args.name == "psf-grid":
         scene = to_tensor([load_scene("synthetic", "val", 0, (256, 512), 0)])
@@ -286,14 +268,44 @@ def cmd_study(args: argparse.Namespace) -> int:
     return 0
 
 
+def mask_spec(name: str, profile: str, seed: int):
+    """The LensSpec behind `name`: a leaderboard entry .json (its published lens spec), a .toml
+    spec, or a registered lens (a co-designed one is trained, or taken from the cache, for
+    `profile` and `seed`) with its current coefficients."""
+    import lenses
+    from benchmark.profiles import get_profile
+    if name.endswith(".json"):
+        path = Path(name)
+        if not path.is_file():
+            raise FileNotFoundError(f"leaderboard entry {name!r} does not exist")
+        spec = json.loads(path.read_text()).get("lens_spec")
+        if not spec:
+            raise ValueError(f"{name}: the entry stores no lens_spec to export")
+        return lenses.parse_spec(spec, source=name)
+    return lenses.load(name, profile=get_profile(profile), seed=seed).current_spec()
+
+
+def cmd_export_mask(args: argparse.Namespace) -> int:
+    from lenses.mask_export import height_map, write_height_map
+    spec = mask_spec(args.lens, args.profile, args.seed)
+    heights = height_map(spec, args.samples)
+    written = write_height_map(heights, args.out, args.fmt)
+    meta = heights.metadata
+    print(f"{spec.name}: {args.samples} x {args.samples} nodes over {meta['aperture_diameter_mm']} mm "
+          f"({meta['grid']['spacing_um']:.3f} um apart), peak-to-valley {meta['peak_to_valley_um']:.4f} um of "
+          f"{meta['material']}; wrote {', '.join(str(p) for p in written)}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     from lenses.registry import DuplicateNameError
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     args = build_parser().parse_args(argv)
+    level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", force=True)
+    commands = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "train": cmd_train, "study": cmd_study,
+                "export-mask": cmd_export_mask}
     try:
-        return {"list": cmd_list, "run": cmd_run, "report": cmd_report, "train": cmd_train,
-                "study": cmd_study}[args.command](*(
-            () if args.command == "list" else (args,)))
+        return commands[args.command](*(() if args.command == "list" else (args,)))
     except (ValueError, LookupError, NotImplementedError, FileNotFoundError, DuplicateNameError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -24,14 +24,14 @@ import torch
 import attacks
 import lenses
 from benchmark.cache import ArtifactCache, discard, exclusive, read_verified, write_verified
-from benchmark.charts.plates import write_plate_gallery
+from benchmark.charts.plate_gallery import write_plate_gallery
 from benchmark.evaluation import Attacked, Target, attempt, run_reader, run_restorers
 from benchmark.intervals import utility_intervals
 from benchmark.planning import AttackerRef, Task, fit_task
 from benchmark.plate_spectrum import cached_plate_spectrum
-from benchmark.plates import readable
+from benchmark.plate_scoring import readable
 from benchmark.provenance import provenance
-from benchmark.report import write_sample_grid
+from benchmark.charts.samples import write_sample_grid
 from benchmark.rows import RowBuilder
 from benchmark.run_config import RunConfig, training_scenes
 from benchmark.scenes import Scene, load_scenes, plate_entropy_bits
