@@ -122,5 +122,5 @@ def chart(curves: list[dict[str, Any]], path: Path, title: str) -> Path:
     ax.plot(*_series(curves, "psf_radius_px"))
     ax.set_title("PSF RMS radius (px)")
     ax.set_xlabel("step")
-    fig.suptitle(title)
+    fig.suptitle(title, fontsize=9)
     return save_figure(fig, path)
