@@ -18,7 +18,7 @@ from typing import Any
 
 from torch.utils.tensorboard import SummaryWriter
 
-from benchmark.charts import plt, save_figure
+from benchmark.charts import new_figure, save_figure
 from benchmark.codesign.coefficients import NOLL_NAMES
 
 # TensorBoard groups: prefix of a stat's name -> folder of its tag.
@@ -92,7 +92,8 @@ def _series(curves: list[dict[str, Any]], key: str) -> tuple[list[int], list[flo
 
 def chart(curves: list[dict[str, Any]], path: Path, title: str) -> Path:
     """Four panels over the steps: losses, optics-gradient norms (log), coefficients (um), PSF radius (px)."""
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
+    fig = new_figure(figsize=(11, 7))
+    axes = fig.subplots(2, 2, sharex=True)
     ax = axes[0, 0]
     for key in ("seg", "deb", "penalty"):
         ax.plot(*_series(curves, key), label=tag(key).split("/")[1])
