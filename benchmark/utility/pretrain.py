@@ -206,7 +206,7 @@ def train(profile: Any, seed: int, device: str, cache_dir: Path, scene_set: str 
               ("miou", "mean_acc", "overall_acc", "class_iou")},
               "plateau": plateau(curve, steps),
               "train_class_pixel_fraction": dict(zip(CLASS_NAMES, map(float, sampler.class_pixel_fraction()))),
-              "timing": {"seconds_per_step": state["train_s"] / steps,  # resumed parts included "train_s": state["train_s"],
+              "timing": {"seconds_per_step": state["train_s"] / steps, "train_s": state["train_s"],  # resumed parts too
                          "eval_s": state["eval_s"], "scene_generation_s": state["scene_s"],
                          "wall_s": state["train_s"] + state["eval_s"] + state["scene_s"],
                          "threads": torch.get_num_threads(), "load_avg_1_5_15min_at_curve_points": state["loads"],
