@@ -69,8 +69,10 @@ def build_parser() -> argparse.ArgumentParser:
     pre = sub.add_parser("pretrain", help="pre-train the clean utility net to its plateau; export weights + provenance")
     pre.add_argument("--profile", default="quick", choices=list(PROFILES), help="recipe and val set (default: quick)")
     pre.add_argument("--seed", type=int, default=0, help="training seed, and the seed of the val scenes (default 0)")
-    pre.add_argument("--out", type=Path, default=None, help="weights folder (default: the package's benchmark/utility/weights)")
-    pre.add_argument("--dir", type=Path, default=None, help="leaderboard folder for the study and chart (default: the repository's)")
+    pre.add_argument("--out", type=Path, default=None,
+                     help="weights folder (default: the package's benchmark/utility/weights)")
+    pre.add_argument("--dir", type=Path, default=None,
+                     help="leaderboard folder for the study and chart (default: the repository's)")
     pre.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
     sub.add_parser("list", help="list registered lenses, attackers and scene sets")
     rep = sub.add_parser("report", help="render leaderboard/README.md and charts from leaderboard/entries/")

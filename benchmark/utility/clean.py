@@ -86,7 +86,8 @@ def load_verified(weights: Path, variant: str) -> torch.nn.Module:
         state = load_file(str(weights))
         net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
     except Exception as exc:  # safetensors and torch raise several types for a bad file
-        raise CorruptWeightsError(f"utility weights {weights} cannot be loaded into SegFormer-{variant}: {exc}") from exc
+        raise CorruptWeightsError(f"utility weights {weights} cannot be loaded into SegFormer-{variant}: "
+                                  f"{exc}") from exc
     return net.eval()
 
 
@@ -102,3 +103,14 @@ def clean_utility_net(profile: Any, seed: int, device: str, cache_dir: Path, sce
         return load_verified(shipped, profile.utility_model).to(device)
     from benchmark.utility.pretrain import cached_clean_net
     return cached_clean_net(profile, seed, device, cache_dir, scene_set, progress)
+
+
+def clean_utility_id(profile: Any, seed: int, scene_set: str = "synthetic") -> str:
+    """What :func:`clean_utility_net` returns for these arguments, for the cache keys of runs that
+    fine-tune it: ``shipped:<sha256 recorded for the file>``, else ``recipe:<hash of the pre-training recipe>``."""
+    shipped = shipped_for(profile, scene_set)
+    if shipped is not None:
+        return "shipped:" + json.loads(provenance_path_for(shipped).read_text())["file"]["sha256"]
+    from benchmark.cache import config_hash
+    from benchmark.utility.pretrain import recipe
+    return "recipe:" + config_hash(recipe(profile, seed, scene_set))
