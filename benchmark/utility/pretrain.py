@@ -277,43 +277,6 @@ def export(net: torch.nn.Module, record: dict[str, Any], profile: Any, out_dir: 
     return weights, provenance
 
 
-def write_chart(provenance: dict[str, Any], path: Path) -> Path:
-    """Learning curve (sharp val mIoU and train CE against step) and the final per-class IoU."""
-    import matplotlib.pyplot as plt
-
-    from benchmark.charts import save_figure
-    curve = provenance["curve"]
-    fig, (ax, bars) = plt.subplots(1, 2, figsize=(12, 4.2), gridspec_kw={"width_ratios": [1.1, 1]})
-    steps = [p["step"] for p in curve]
-    ax.plot(steps, [p["miou"] for p in curve], "o-", color="tab:blue", label="sharp val mIoU")
-    ax.axhline(0.5, color="grey", ls=":", lw=1, label="issue 14 target 0.50")
-    ax.set_xlabel("training step")
-    ax.set_ylabel("mIoU")
-    ax.set_ylim(0, max(0.6, max(p["miou"] for p in curve) + 0.05))
-    twin = ax.twinx()
-    twin.plot(steps, [p["train_ce"] for p in curve], "s--", color="tab:orange", ms=3, label="train CE")
-    twin.set_ylabel("train cross-entropy (mean since previous point)")
-    lines = ax.get_legend_handles_labels()
-    more = twin.get_legend_handles_labels()
-    ax.legend(lines[0] + more[0], lines[1] + more[1], loc="lower right", fontsize=8)
-    r, p = provenance["recipe"], provenance["plateau"]
-    gain = "n/a" if p["gain_last_fifth"] is None else f"{p['gain_last_fifth']:+.3f}"
-    ax.set_title(f"SegFormer-{r['model']} clean pre-training ({provenance['profile']}): "
-                 f"{r['n_train_scenes']} scenes, {r['crop'][0]}x{r['crop'][1]} crops,\n"
-                 f"last-fifth gain {gain} (plateau < {PLATEAU_GAIN})", fontsize=9)
-    iou = provenance["final_shipped"]["class_iou"]
-    names = list(iou)
-    values = [np.nan if iou[n] is None else iou[n] for n in names]
-    bars.barh(range(len(names)), values, color="tab:blue")
-    bars.set_yticks(range(len(names)), names, fontsize=8)
-    bars.invert_yaxis()
-    bars.set_xlim(0, 1)
-    bars.set_xlabel("IoU on the sharp val scenes (weights as shipped)")
-    bars.set_title(f"per-class IoU, mIoU {provenance['final_shipped']['miou']:.3f} "
-                   f"({provenance['val']['n_scenes']} val scenes, seed {provenance['val']['seed']})", fontsize=9)
-    return save_figure(fig, path, dpi=100)
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The `pretrain` command's arguments (the same as `python -m benchmark pretrain`'s)."""
     from benchmark.profiles import PROFILES
@@ -329,7 +292,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None, args: argparse.Namespace | None = None) -> int:
     """`python -m benchmark pretrain`: train (or resume, or load from the cache), export, chart."""
     from benchmark import leaderboard
+    from benchmark.charts import save_figure
     from benchmark.profiles import get_profile
+    from benchmark.utility.pretrain_chart import pretrain_figure
     args = args or build_parser().parse_args(argv)
     profile = get_profile(args.profile)
     git_commit()  # pinned now, as the code was imported
@@ -341,7 +306,7 @@ def main(argv: list[str] | None = None, args: argparse.Namespace | None = None) 
     study = directory / "studies" / "utility_pretrain.json"
     study.parent.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(provenance_file, study)
-    chart = write_chart(body, directory / "charts" / "utility_pretrain.png")
+    chart = save_figure(pretrain_figure(body), directory / "charts" / "utility_pretrain.png", dpi=100)
     print(f"wrote {weights} ({body['file']['bytes'] / 1e6:.1f} MB), {provenance_file}, {study}, {chart}")
     print(f"sharp val mIoU {body['final_shipped']['miou']:.4f} as shipped ({body['file']['dtype']}), "
           f"{body['final_float32']['miou']:.4f} in float32; last-fifth gain {body['plateau']['gain_last_fifth']}")
