@@ -31,7 +31,7 @@ def pretrain_figure(provenance: dict[str, Any]) -> plt.Figure:
     twin.set_ylabel("train cross-entropy (mean since the previous point)")
     handles, labels = ax.get_legend_handles_labels()
     more_handles, more_labels = twin.get_legend_handles_labels()
-    ax.legend(handles + more_handles, labels + more_labels, loc="center right", fontsize=8)
+    ax.legend(handles + more_handles, labels + more_labels, loc="lower right", fontsize=8)
     r, p = provenance["recipe"], provenance["plateau"]
     gain = "n/a" if p["gain_last_fifth"] is None else f"{p['gain_last_fifth']:+.3f}"
     verdict = "plateau reached" if p["reached"] else "no plateau"
