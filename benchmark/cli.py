@@ -72,6 +72,14 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     train.add_argument("--device", type=_device, default="cpu",
                        help="cpu (default; gloo under torchrun) or cuda (NCCL under torchrun, one GPU per rank)")
+    pre = sub.add_parser("pretrain", help="pre-train the clean utility net to its plateau; export weights + provenance")
+    pre.add_argument("--profile", default="quick", choices=list(PROFILES), help="recipe and val set (default: quick)")
+    pre.add_argument("--seed", type=int, default=0, help="training seed, and the seed of the val scenes (default 0)")
+    pre.add_argument("--out", type=Path, default=None,
+                     help="weights folder (default: the package's benchmark/utility/weights)")
+    pre.add_argument("--dir", type=Path, default=None,
+                     help="leaderboard folder for the study and chart (default: the repository's)")
+    pre.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
     sub.add_parser("list", help="list registered lenses, attackers and scene sets")
     rep = sub.add_parser("report", help="render leaderboard/README.md and charts from leaderboard/entries/")
     rep.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
@@ -297,13 +305,18 @@ def cmd_export_mask(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_pretrain(args: argparse.Namespace) -> int:
+    from benchmark.utility.pretrain import main as pretrain_main
+    return pretrain_main(args=args)
+
+
 def main(argv: list[str] | None = None) -> int:
     from lenses.registry import DuplicateNameError
     args = build_parser().parse_args(argv)
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", force=True)
     commands = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "train": cmd_train, "study": cmd_study,
-                "export-mask": cmd_export_mask}
+                "export-mask": cmd_export_mask, "pretrain": cmd_pretrain}
     try:
         return commands[args.command](*(() if args.command == "list" else (args,)))
     except (ValueError, LookupError, NotImplementedError, FileNotFoundError, DuplicateNameError) as exc:

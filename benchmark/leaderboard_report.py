@@ -29,8 +29,10 @@ INTRO = ("Rendered by `python -m benchmark report` from `leaderboard/entries/*.j
 def study_charts(directory: Path, charts: Path) -> list[Path]:
     """Charts of the modelling-choice studies found in `directory`/studies (see benchmark.studies)."""
     from benchmark.charts.studies import psf_grid_figure, utility_size_figure
+    from benchmark.charts.utility_pretrain import pretrain_figure
     written = []
-    for name, figure in (("psf_grid", psf_grid_figure), ("utility_size", utility_size_figure)):
+    for name, figure in (("psf_grid", psf_grid_figure), ("utility_size", utility_size_figure),
+                         ("utility_pretrain", pretrain_figure)):
         path = directory / "studies" / f"{name}.json"
         if path.is_file():
             written.append(save_figure(figure(json.loads(path.read_text())), charts / f"{name}.png", dpi=100))

@@ -39,7 +39,7 @@ from benchmark.schema import Row, RowError, chain_name
 from benchmark.sensing import sense, to_tensor, train_pairs_factory
 from benchmark.utility.measure import has_labels, segmenter, utility_net_for, utility_scores
 from lenses.bound import bound_curve, bound_row
-from benchmark.codesign.trainer import pretrain_utility
+from benchmark.utility.clean import clean_utility_net
 
 log = logging.getLogger(__name__)
 
@@ -121,7 +121,7 @@ def _scenes(cfg: RunConfig, seed: int) -> list[Scene]:
 def _clean_net(cfg: RunConfig, seed: int, scenes: list[Scene]) -> torch.nn.Module | None:
     if not has_labels(scenes):
         return None
-    return pretrain_utility(cfg.profile, seed, cfg.device, cfg.cache_dir, training_scenes(cfg.scenes),
+    return clean_utility_net(cfg.profile, seed, cfg.device, cfg.cache_dir, training_scenes(cfg.scenes),
                             progress=False)
 
 

@@ -48,11 +48,12 @@ from benchmark.codesign.curves import CurveLog
 from benchmark.codesign.data import CropSampler, step_generator
 from benchmark.codesign.replicas import SingleProcess
 from benchmark.codesign.schemes import Scheme
+from benchmark.utility.clean import clean_utility_id, clean_utility_net
 from benchmark.utility.segformer import build_segformer, segment_logits
 from lenses.lens import Lens
 from lenses.spec import LensSpec, load_spec, spec_to_toml
 
-__all__ = ["CoDesign", "SingleProcess", "TrainedLens", "TrainingDivergedError", "pretrain_utility", "psf_radius_px"]
+__all__ = ["CoDesign", "SingleProcess", "TrainedLens", "TrainingDivergedError", "psf_radius_px"]
 
 log = logging.getLogger(__name__)
 
@@ -94,39 +95,6 @@ def _profile_fields(profile: Any, names: tuple[str, ...]) -> dict[str, Any]:
 _DATA_FIELDS = ("image_size", "n_train", "train_crop", "batch_size")
 
 
-def pretrain_utility(profile: Any, seed: int, device: str, cache_dir: Path, scene_set: str = "synthetic",
-                     progress: bool = True) -> torch.nn.Module:
-    """The clean utility net: SegFormer trained on sharp scenes, cached once per (profile, seed)."""
-    config = {"what": "clean-utility", "version": TRAINER_VERSION, "model": profile.utility_model,
-              "steps": profile.pretrain_steps, "lr": profile.seg_lr, "scenes": scene_set, "seed": seed,
-              **_profile_fields(profile, _DATA_FIELDS)}
-    path = Path(cache_dir) / "utility" / f"clean-{profile.utility_model}-{config_hash(config)}.safetensors"
-    torch.manual_seed(seed)
-    net = build_segformer(profile.utility_model).to(device)
-    if path.is_file():
-        return load_weights(path, net).eval()
-    sampler = CropSampler.from_split(scene_set, profile.n_train, profile.image_size, profile.train_crop,
-                                     profile.batch_size, seed)
-    opt = torch.optim.AdamW(net.parameters(), lr=profile.seg_lr)
-    net.train()
-    bar = tqdm(range(profile.pretrain_steps), desc="clean utility pre-training", disable=not progress, leave=False)
-    for step in bar:
-        torch.manual_seed(seed * 7919 + step)
-        x, y = sampler.batch(step, device)
-        loss = F.cross_entropy(segment_logits(net, x), y, ignore_index=IGNORE)
-        if not torch.isfinite(loss):
-            raise TrainingDivergedError(f"clean utility pre-training diverged at step {step} (loss {float(loss)})")
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        bar.set_postfix(ce=f"{loss.item():.3f}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".tmp{torch.randint(1 << 30, (1,)).item()}")
-    save_weights(tmp, net)
-    tmp.replace(path)
-    return net.eval()
-
-
 class CoDesign:
     """One training run: a start spec, a scheme, a profile and a seed; cached by their hash."""
 
@@ -149,6 +117,7 @@ class CoDesign:
             "scheme": {"name": scheme.name, "optics": scheme.optics, "adversary": scheme.adversary,
                        "balance": settings(scheme.balance)},
             "start": start.to_dict(), "seed": seed, "scenes": scene_set,
+            "clean_utility": clean_utility_id(profile, seed, scene_set),
             "initial_amplitude_um": INITIAL_AMPLITUDE_UM if scheme.optics else 0.0,
             "adversary": {"net": "RED10 skips residual", "margin_db": MARGIN_DB} if scheme.adversary else None,
             **_profile_fields(profile, _DATA_FIELDS + ("utility_model", "adversary_width", "pretrain_steps",
@@ -204,7 +173,7 @@ class CoDesign:
     def _setup(self, progress: bool) -> _State:
         """The starting lens, the networks (utility net from the clean one), their optimisers."""
         p, dev, rep = self.profile, self.device, self.replicas
-        clean = rep.writer_first(lambda: pretrain_utility(p, self.seed, dev, self.cache_dir, self.scene_set, progress))
+        clean = rep.writer_first(lambda: clean_utility_net(p, self.seed, dev, self.cache_dir, self.scene_set, progress))
         sampler = CropSampler.from_split(self.scene_set, p.n_train, p.image_size, p.train_crop, p.batch_size, self.seed)
         torch.manual_seed(self.seed)
         lens = Lens(self.start_spec).to(dev)
