@@ -280,8 +280,7 @@ class PupilModel(torch.nn.Module):
         # the co-design corner).
         phase = self.pupil_phase(coefficients_um).to(torch.float32)
         u = torch.polar(self.aperture_f32.expand_as(phase), phase)
-        # Row transforms first: only the N pupil rows are non-zero, so the padded rows cost nothing.
-        field = torch.fft.fft(torch.fft.fft(u, n=size, dim=-1), n=size, dim=-2)
+        field = torch.fft.fft2(u, s=(size, size))
         intensity = field.real**2 + field.imag**2  # |FFT|^2; the dx^4 lives in G
         pixels = self.integration @ intensity @ self.integration.transpose(1, 2)
         total = self.aperture.sum() * self.pupil_dx_mm**2 * (self.wavelength_mm * self.constants.sensor_distance_mm) ** 2
