@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 KNOB_TITLES = {"energy_fraction": "PSF support K (energy fraction held)", "pupil_samples": "pupil grid N",
-               "oversample": "pixel oversampling s"}
+               "oversample": "pixel integration: s x s midpoints (0 = exact)"}
 
 
 def psf_grid_figure(study: dict) -> plt.Figure:
