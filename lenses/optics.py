@@ -222,7 +222,6 @@ class PupilModel(torch.nn.Module):
         rho2 = coords[None, :] ** 2 + coords[:, None] ** 2
         self.register_buffer("basis", basis, persistent=False)
         self.register_buffer("aperture", (rho2 <= 1.0).to(torch.float64), persistent=False)
-        self.register_buffer("aperture_f32", self.aperture.to(torch.float32), persistent=False)
         self.register_buffer("rho2", rho2, persistent=False)
         self.register_buffer("phase_per_um", torch.tensor(c.phase_per_um, dtype=torch.float64), persistent=False)
         self.register_buffer("defocus", torch.tensor(c.defocus_rad, dtype=torch.float64), persistent=False)
@@ -234,7 +233,7 @@ class PupilModel(torch.nn.Module):
                                                          geometry.fft_size) for period in self.period_mm])
         # The field is the FFT times dx^2; folding that factor into G spares a pass over (3, L, L).
         integration = integration * self.pupil_dx_mm**2
-        self.register_buffer("integration", torch.from_numpy(integration).to(torch.float32), persistent=False)
+        self.register_buffer("integration", torch.from_numpy(integration), persistent=False)
         self.register_buffer("wavelength_mm", torch.tensor(c.wavelength_mm, dtype=torch.float64), persistent=False)
         self._mft_kernels: dict[int, torch.Tensor] = {}
 
@@ -265,8 +264,8 @@ class PupilModel(torch.nn.Module):
         return field.real**2 + field.imag**2
 
     def pixel_energy(self, coefficients_um: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Energy per sensor pixel (3, K, K) float32, the intensity integrated exactly over each
-        pixel, and the total energy (3,) float64, both in mm^2 x pupil intensity units.
+        """Energy per sensor pixel (3, K, K), the intensity integrated exactly over each pixel, and
+        the total energy (3,), both float64 in mm^2 x pupil intensity units.
 
         The field at the L x L sensor positions j lambda z_s / (L dx) of one period is the
         zero-padded FFT of the pupil times dx^2 (times a phase from the grid origin, which |.|^2
@@ -275,11 +274,13 @@ class PupilModel(torch.nn.Module):
         energy fraction that landed inside the K x K crop.
         """
         size = self.geometry.fft_size
-        # The phase (up to hundreds of rad) is summed in double precision, then rounded: single
-        # precision from there on halves the cost and changes the PSF by < 1e-6 in L1 (measured on
-        # the co-design corner).
-        phase = self.pupil_phase(coefficients_um).to(torch.float32)
-        u = torch.polar(self.aperture_f32.expand_as(phase), phase)
+        # Double precision throughout, though single would halve the cost and change the PSF by
+        # < 1e-6 in L1: at the co-design start (a flat mask) the PSF's first derivatives with
+        # respect to the even terms (defocus, astigmatism) are exactly zero, and single-precision
+        # rounding noise there is as large as Adam's epsilon, so it would push those coefficients by
+        # up to one learning rate per step in a random direction (and data-parallel ranks would no
+        # longer reproduce the single-process run: tests/lenses/test_ddp.py).
+        u = self.pupil_field(coefficients_um)
         field = torch.fft.fft2(u, s=(size, size))
         intensity = field.real**2 + field.imag**2  # |FFT|^2; the dx^4 lives in G
         pixels = self.integration @ intensity @ self.integration.transpose(1, 2)
@@ -290,7 +291,7 @@ class PupilModel(torch.nn.Module):
         """PSF (3, K, K) float32, each channel summing to 1, and the energy fraction (3,) inside it."""
         pixels, total = self.pixel_energy(coefficients_um)
         inside = pixels.sum(dim=(1, 2))
-        return pixels / inside[:, None, None], (inside / total).to(torch.float32)
+        return (pixels / inside[:, None, None]).to(torch.float32), (inside / total).to(torch.float32)
 
 
 def energy_support(psf_unnormalised: torch.Tensor, total: torch.Tensor, fraction: float) -> int:

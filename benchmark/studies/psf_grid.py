@@ -14,8 +14,9 @@ at the midpoints of s x s cells per pixel (the suite's rule before, with s = 3);
 integral, the default.
 
 - ``psf_grad_ms``: fastest of ``repeats`` timings of PSF + backward through the coefficients on one
-  thread (one thread and the minimum, not the median: the figure least disturbed by other work on
-  the machine, so that the knobs compare with each other; absolute times with more threads differ).
+  thread, in process CPU time (one thread, CPU time and the minimum, not wall time or the median:
+  the figure least disturbed by other work on a shared machine, so that the knobs compare with each
+  other; absolute times with more threads differ).
 """
 
 from __future__ import annotations
@@ -85,10 +86,10 @@ def _psf_grad_ms(spec: LensSpec, geometry: Geometry, oversample: int, repeats: i
     torch.set_num_threads(1)
     try:
         for _ in range(repeats + 1):  # the first run warms the allocator up and is dropped
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             pixels = _pixel_energy(model, coeffs, oversample)
             (pixels / pixels.sum(dim=(1, 2), keepdim=True) * weights).sum().backward()
-            times.append(time.perf_counter() - t0)
+            times.append(time.process_time() - t0)
     finally:
         torch.set_num_threads(threads)
     return 1e3 * min(times[1:])
