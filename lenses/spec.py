@@ -68,7 +68,6 @@ class SensorSpec:
 
 @dataclass(frozen=True)
 class SimulationSpec:
-    oversample: int = 3  # sub-samples per pixel side for pixel integration (>= 2)
     # PSF support holds at least this energy. 0.99 rather than 0.999: the last 0.9 % lies in faint
     # diffraction rings out to ~260 px; cropping them changes a convolved image by 56 dB PSNR,
     # 13 dB below the sensor's own shot noise at mid-grey, at a 7x smaller K (README, measured).
@@ -145,10 +144,16 @@ def _check_keys(table: dict, allowed: set[str], where: str) -> None:
             )
 
 
+# Keys that older specs (and the leaderboard entries that store them) carry but that no longer mean
+# anything: `simulation.oversample` chose the s x s sub-pixel sums that exact pixel integration replaced.
+_OBSOLETE_KEYS = {"simulation": {"oversample"}}
+
+
 def _section(raw: dict, name: str) -> dict:
     table = raw.get(name, {})
     if not isinstance(table, dict):
         raise LensSpecError(f"[{name}] must be a table, got {type(table).__name__}")
+    table = {k: v for k, v in table.items() if k not in _OBSOLETE_KEYS.get(name, set())}
     _check_keys(table, {f.name for f in dataclasses.fields(_SECTIONS[name])}, name)
     return table
 
@@ -248,7 +253,6 @@ def _simulation(t: dict) -> SimulationSpec:
     if max_k % 2 == 0:
         raise LensSpecError(f"simulation.max_psf_size_px = {max_k} must be odd (the PSF has a centre pixel)")
     return SimulationSpec(
-        oversample=_integer(t.get("oversample", d.oversample), "simulation.oversample", 2),
         psf_energy_fraction=frac,
         max_psf_size_px=max_k,
         max_pupil_samples=_integer(t.get("max_pupil_samples", d.max_pupil_samples), "simulation.max_pupil_samples", 32),

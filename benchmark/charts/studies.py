@@ -8,7 +8,7 @@ from matplotlib.figure import Figure
 from benchmark.charts import new_figure
 
 KNOB_TITLES = {"energy_fraction": "PSF support K (energy fraction held)", "pupil_samples": "pupil grid N",
-               "oversample": "pixel oversampling s"}
+               "oversample": "pixel integration: s x s midpoints (0 = exact)"}
 
 
 def psf_grid_figure(study: dict) -> Figure:
