@@ -12,7 +12,6 @@ the provenance.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from pathlib import Path
 from typing import Any
@@ -21,25 +20,14 @@ import torch
 from safetensors.torch import load_file
 
 from benchmark.utility.segformer import build_segformer
+from benchmark.utility.weights_files import WEIGHTS_DIR, file_sha256, provenance_path_for
 
-WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+__all__ = ["WEIGHTS_DIR", "CorruptWeightsError", "clean_utility_id", "clean_utility_net", "file_sha256",
+           "provenance_path_for", "shipped_for"]
 
 
 class CorruptWeightsError(ValueError):
     """A weights file does not match its provenance (size, sha256) or cannot be read as safetensors."""
-
-
-def provenance_path_for(weights: Path) -> Path:
-    """``x.safetensors`` -> ``x.json`` beside it."""
-    return Path(weights).with_suffix(".json")
-
-
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def matches(provenance: dict[str, Any], profile: Any, scene_set: str) -> bool:

@@ -235,7 +235,7 @@ def export(net: torch.nn.Module, record: dict[str, Any], profile: Any, out_dir: 
     shipped (cast to ``dtype`` and back) beside those of the trained float32 net, and the mIoU of
     the first ``CHECK_SCENES`` val scenes that the package test re-measures.
     """
-    from benchmark.utility.clean import file_sha256, provenance_path_for
+    from benchmark.utility.weights_files import file_sha256, provenance_path_for
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     stem = f"segformer-{profile.utility_model}-{profile.name}"
@@ -299,7 +299,7 @@ def main(argv: list[str] | None = None, args: argparse.Namespace | None = None) 
     profile = get_profile(args.profile)
     git_commit()  # pinned now, as the code was imported
     net, record = train(profile, args.seed, args.device, cache_root())
-    from benchmark.utility.clean import WEIGHTS_DIR
+    from benchmark.utility.weights_files import WEIGHTS_DIR
     weights, provenance_file = export(net, record, profile, args.out or WEIGHTS_DIR, args.device)
     body = json.loads(provenance_file.read_text())
     directory = args.dir or leaderboard.LEADERBOARD
