@@ -17,7 +17,6 @@ import torch
 from tqdm.auto import tqdm
 
 import attacks
-import lenses
 from benchmark.budget import time_budget
 from benchmark.intervals import plate_intervals, scene_intervals
 from benchmark.metrics import psnr, ssim
@@ -138,7 +137,6 @@ class Target:
     ctx: attacks.FitContext
     segment_sensor: Callable[[torch.Tensor], torch.Tensor] | None   # lens's own net on sensor images
     segment_restored: Callable[[torch.Tensor], torch.Tensor] | None  # clean net on restored images
-    lens: lenses.Lens | None = None
 
 
 @dataclass
