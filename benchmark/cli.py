@@ -29,6 +29,16 @@ def _seeds(text: str) -> list[int]:
     return seeds
 
 
+def _budget(text: str) -> float:
+    try:
+        seconds = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--budget-s must be a number of seconds, got {text!r}") from None
+    if not seconds > 0:
+        raise argparse.ArgumentTypeError(f"--budget-s must be > 0 seconds, got {text!r}")
+    return seconds
+
+
 def _device(text: str) -> str:
     import torch
     if text == "cpu":
@@ -64,6 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="also write one leaderboard entry per lens to leaderboard/entries/ and re-render it")
     run.add_argument("--plate-format", default=None, metavar="FORMAT",
                      help="plate strings the privacy bound counts: L = letter, D = digit (default: the scene generator's)")
+    run.add_argument("--budget-s", type=_budget, default=None, metavar="SECONDS",
+                     help="wall-time budget of each expensive step (an attacker's fit, restore or read; the bound): "
+                          "a step past it gives a failed row with a clear message (default: none)")
     run.add_argument("--frames", type=int, default=30, metavar="T",
                      help="frames of a static plate for the video bound (default 30; T = 1 is always reported)")
     train = sub.add_parser("train", help="train (or load) a co-designed lens; under torchrun, data-parallel over the ranks")
@@ -191,7 +204,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     executors.get(args.executor)  # fails fast on a bad name or a missing Ray
     selection = runner.select_attackers(args.attack)
     cfg = RunConfig(lenses=args.lens, attacks=args.attack, scenes=args.scenes, profile=profile,
-                    seeds=args.seeds, device=args.device, plate_format=plate_format, frames=args.frames)
+                    seeds=args.seeds, device=args.device, plate_format=plate_format, frames=args.frames,
+                    budget_s=args.budget_s)
     out, created = prepare_out(args.out)
     print(f"profile {profile.name}: {json.dumps(profile.to_dict())}")
     try:

@@ -7,7 +7,7 @@ recomputing the pooled score. The interval functions themselves are `benchmark.s
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import torch
@@ -39,7 +39,7 @@ def plate_intervals(row: Row, outcomes: Sequence[PlateOutcome]) -> None:
         row.set_interval("plate_cer", low, high, "bootstrap")
 
 
-def scene_intervals(row: Row, per_image: dict[str, Sequence[float]], seed: int) -> None:
+def scene_intervals(row: Row, per_image: Mapping[str, Sequence[float]], seed: int) -> None:
     """Scene-bootstrap intervals of the row's metrics that are means of `per_image` values."""
     for name, values in per_image.items():
         if name in row.metrics and len(values) > 0 and all(np.isfinite(values)):
@@ -52,9 +52,15 @@ def utility_intervals(row: Row, per_scene_confusion: torch.Tensor) -> None:
     parts = [c.double().numpy() for c in per_scene_confusion]
     for name in ("miou", "mean_acc", "overall_acc"):
         if name in row.metrics and parts:
-            low, high = _pooled_bootstrap(parts, lambda conf, n=name: float(scores(torch.from_numpy(conf))[n]),
+            low, high = _pooled_bootstrap(parts, lambda conf, n=name: _score(conf, n),
                                           row.seed)
             row.set_interval(name, low, high, "bootstrap")
+
+
+def _score(confusion: np.ndarray, name: str) -> float:
+    value = scores(torch.from_numpy(confusion))[name]
+    assert isinstance(value, float)
+    return value
 
 
 def _pooled_bootstrap(parts: list[np.ndarray], statistic, seed: int) -> tuple[float, float]:

@@ -23,19 +23,18 @@ import torch
 
 import attacks
 import lenses
+from benchmark.budget import BudgetExceeded, time_budget
 from benchmark.cache import ArtifactCache, discard, exclusive, read_verified, write_verified
-from benchmark.charts.plate_gallery import write_plate_gallery
 from benchmark.evaluation import Attacked, Target, attempt, run_reader, run_restorers
 from benchmark.intervals import utility_intervals
 from benchmark.planning import AttackerRef, Task, fit_task
 from benchmark.plate_spectrum import cached_plate_spectrum
-from benchmark.plate_scoring import readable
 from benchmark.provenance import provenance
-from benchmark.charts.samples import write_sample_grid
 from benchmark.rows import RowBuilder
+from benchmark.run_pictures import plate_gallery, sample_grid
 from benchmark.run_config import RunConfig, training_scenes
 from benchmark.scenes import Scene, load_scenes, plate_entropy_bits
-from benchmark.schema import Row, RowError, chain_name
+from benchmark.schema import Row, RowError
 from benchmark.sensing import sense, to_tensor, train_pairs_factory
 from benchmark.utility.measure import has_labels, segmenter, utility_net_for, utility_scores
 from lenses.bound import bound_curve, bound_row
@@ -55,6 +54,12 @@ class TaskResult:
     settings: dict[str, dict] = field(default_factory=dict)
     plates: list[dict] = field(default_factory=list)
     meta: dict = field(default_factory=dict)
+
+    @property
+    def has_failures(self) -> bool:
+        """True when a row failed or the task recorded an error: such a result is not reused by a
+        later run (the attacker may have been fixed since), only within the run that made it."""
+        return "error" in self.meta or any(not r.ok for r in self.rows)
 
     def to_json(self) -> dict[str, Any]:
         return {"rows": [r.to_json() for r in self.rows], "settings": self.settings, "plates": self.plates,
@@ -84,14 +89,15 @@ def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
 
     The per-task lock lets one run compute while others sharing the cache wait and read its
     result; staging folders are removed only under that lock, i.e. only when their owner is gone.
+    A stored result with failures is computed again.
     """
     done = load_result(directory, task)
-    if done is not None:
+    if done is not None and not done.has_failures:
         return done
     directory.mkdir(parents=True, exist_ok=True)
     with exclusive(directory / f".{task.key}.lock"):
         done = load_result(directory, task)  # another run finished it while this one waited
-        if done is not None:
+        if done is not None and not done.has_failures:
             return done
         for stale in directory.glob(f".{task.key}.staging-*"):  # left by a run that died mid-task
             shutil.rmtree(stale, ignore_errors=True)
@@ -103,7 +109,7 @@ def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
             row.provenance["wall_s"] = time.perf_counter() - t0
         write_verified(staging / RESULT_FILE, json.dumps(result.to_json(), default=str, allow_nan=False).encode())
         final = directory / task.key
-        if final.exists():  # a corrupt result, found and discarded above
+        if final.exists():  # a corrupt result, or one with failures
             shutil.rmtree(final)
         os.replace(staging, final)
     loaded = load_result(directory, task)
@@ -152,8 +158,10 @@ def _load_attackers(refs: tuple[AttackerRef, ...], kind: type[attacks.Attack], b
     for ref in refs:
         attacker = attempt(ref.name, "load", lambda: attacks.load(ref.spec))
         if isinstance(attacker, RowError):
-            row_kind = "reader" if kind is attacks.Reader else "restorer"
-            failed.append(builder.failed(row_kind, ref.name, attacker, **{row_kind: ref.name}))
+            if kind is attacks.Reader:
+                failed.append(builder.failed("reader", ref.name, attacker, reader=ref.name))
+            else:
+                failed.append(builder.failed("restorer", ref.name, attacker, restorer=ref.name))
         elif isinstance(attacker, kind):
             loaded.append(attacker)
     return loaded, failed
@@ -228,14 +236,18 @@ def _bound(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     lens = _lens(cfg, task.lens, task.seed)
     spectrum = cached_plate_spectrum(cfg.cache_dir, cfg.profile.bound_scenes, seed=task.seed)
     bits = plate_entropy_bits(cfg.plate_format)
+    builder = _builder(cfg, task.lens, task.seed, lens, plate_format=cfg.plate_format, frames=cfg.frames)
     t0 = time.perf_counter()
-    values = bound_row(lens, spectrum, bits, frames=tuple(sorted({1, cfg.frames})))
+    try:
+        with time_budget(cfg.budget_s, f"the bound of lens {task.lens!r}"):
+            values = bound_row(lens, spectrum, bits, frames=tuple(sorted({1, cfg.frames})))
+            curve = bound_curve(lens, spectrum, list(BOUND_CURVE_WIDTHS_PX), bits)
+    except BudgetExceeded as exc:
+        return TaskResult([builder.failed("bound", "bound", RowError("bound", "measure", str(exc)))], builder.settings)
     metrics = {k: float(v) for k, v in values.items() if not isinstance(v, str)}
     metrics["fit_s"] = time.perf_counter() - t0
     notes = {k: v for k, v in values.items() if isinstance(v, str)}
     notes["bound_plate_format"] = cfg.plate_format
-    builder = _builder(cfg, task.lens, task.seed, lens, plate_format=cfg.plate_format, frames=cfg.frames)
-    curve = bound_curve(lens, spectrum, BOUND_CURVE_WIDTHS_PX, bits)
     return TaskResult([builder.row("bound", metrics, notes=notes)], builder.settings,
                       meta={"curve": {k: [float(x) for x in v] for k, v in curve.items()}})
 
@@ -251,7 +263,7 @@ def _fit(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     if reason:
         return TaskResult(meta={"skipped": reason})
     t0 = time.perf_counter()
-    error = attempt(ref.name, "fit", lambda: attacker.fit(ctx))
+    error = attempt(ref.name, "fit", lambda: attacker.fit(ctx), cfg.budget_s)
     if isinstance(error, RowError):
         return TaskResult(meta={"error": error.to_json()})
     return TaskResult(meta={"fit_s": time.perf_counter() - t0})
@@ -267,56 +279,30 @@ def _evaluate(task: Task, cfg: RunConfig, staging: Path) -> TaskResult:
     segment_sensor = segmenter(lens_net, cfg) if lens_net is not None else None
     target = Target(task.lens, scenes, sharp, sense(lens, sharp, cfg.profile.batch_size, task.seed, cfg.device),
                     fit_context(lens, cfg, task.seed, segment_sensor), segment_sensor,
-                    segmenter(clean, cfg) if clean is not None else None, lens)
+                    segmenter(clean, cfg) if clean is not None else None)
     builder = _builder(cfg, task.lens, task.seed, lens)
     restorers, failed_restorers = _load_attackers(task.restorers, attacks.Restorer, builder)
     readers, failed_readers = _load_attackers(task.readers, attacks.Reader, builder)
     fitted = {ref.name: _fit_meta(staging.parent, task, ref) for ref in task.restorers}
     out = Attacked(rows=failed_restorers + failed_readers)
     run_restorers(target, restorers, fitted, cfg, builder, out)
-    pictures = [_sample_grid(target, out, staging)]
+    pictures = [sample_grid(target, lens, out, staging)]
     for reader in readers:
         reason = reader.skip_reason(target.ctx)
         if reason:
             log.info("%s on %s skipped: %s", reader.name, task.lens, reason)
             continue
         run_reader(target, reader, cfg, builder, out)
-        gallery = _plate_gallery(target, out, reader.name, staging)
+        gallery = plate_gallery(target, out, reader.name, staging)
         pictures += [gallery] if gallery else []
     return TaskResult(out.rows, builder.settings, out.plates, meta={"pictures": pictures})
 
 
 def _fit_meta(directory: Path, task: Task, ref: AttackerRef) -> dict:
+    """The meta of the restorer's fit task; {} when another run is just redoing it (the evaluate
+    task then fits the restorer itself)."""
     done = load_result(directory, fit_task(task.seed, task.lens, ref))
-    if done is None:
-        raise RuntimeError(f"task {task.key} ran before the fit of {ref.name!r} finished; the executor broke the order")
-    return done.meta
-
-
-def _sample_grid(target: Target, out: Attacked, folder: Path) -> str:
-    """One PNG: scene, PSF, sensor image and each restorer's output with its score; its file name."""
-    scores = {r.attack: f"PSNR {r.metrics['psnr_db']:.2f} dB, SSIM {r.metrics['ssim']:.3f}" for r in out.rows
-              if r.attack == r.restorer and "psnr_db" in r.metrics and "ssim" in r.metrics}
-    def as_hwc(t: torch.Tensor):
-        return t[0].permute(1, 2, 0).clamp(0, 1).numpy()
-    name = f"samples_{target.lens_name}_seed{target.ctx.seed}.png".replace("/", "_")
-    assert target.lens is not None
-    write_sample_grid(folder / name, target.lens_name, target.lens.psf().detach().cpu().numpy(),
-                      as_hwc(target.sharp), as_hwc(target.sensor), {k: as_hwc(v) for k, v in out.restored.items()},
-                      scores)
-    return name
-
-
-def _plate_gallery(target: Target, out: Attacked, reader: str, folder: Path) -> str | None:
-    """The reader's plate gallery over sensor and restored images; its file name (None: nothing to show)."""
-    if reader not in out.reads or not any(readable(pl) for s in target.scenes for pl in s.plates):
-        return None
-    chains = {name: chain_name(name, reader) for name in out.restored if chain_name(name, reader) in out.reads}
-    images = {"sharp": target.sharp, "sensor": target.sensor, **{n: out.restored[n] for n in chains}}
-    reads = {"sensor": out.reads[reader], **{n: out.reads[c] for n, c in chains.items()}}
-    name = f"plates_{target.lens_name}_{reader}_seed{target.ctx.seed}.png".replace("/", "_")
-    write_plate_gallery(images, target.scenes, reads, folder / name)
-    return name
+    return {} if done is None else done.meta
 
 
 _KINDS: dict[str, Callable[[Task, RunConfig, Path], TaskResult]] = {
