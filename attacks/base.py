@@ -178,7 +178,7 @@ class Attack(ABC):
         # Wrap an overriding ``fit`` so the requirement check runs even when a plugin author
         # forgets to call super().fit(): missing inputs must fail before any training starts.
         if "fit" in cls.__dict__:
-            cls.fit = _checking_requirements(cls.__dict__["fit"])  # type: ignore[method-assign]
+            cls.fit = _checking_requirements(cls.__dict__["fit"])  # type: ignore[method-assign, assignment]
 
     def check_requirements(self, ctx: FitContext) -> None:
         """Raise ``MissingRequirementError`` naming this attacker and every required field of

@@ -158,9 +158,10 @@ def load_all(names: list[str] | None = None) -> tuple[list[Attack], list[PluginF
     for spec in requested:
         kind = None
         try:
-            cls = _resolve(spec, registered)
-            kind = "reader" if issubclass(cls, Reader) else "restorer" if issubclass(cls, Restorer) else None
-            attacker = cls()
+            obj, origin, registered_name = _import(spec, registered)
+            if isinstance(obj, type):
+                kind = "reader" if issubclass(obj, Reader) else "restorer" if issubclass(obj, Restorer) else None
+            attacker = _checked_class(obj, origin, registered_name)()
         except UnknownPluginError:
             raise
         except Exception as exc:  # noqa: BLE001 - any plugin bug must not take the run down
@@ -190,18 +191,21 @@ def _check_unique(name: str, origin: str, sources: dict[str, str], registered: d
 
 
 def _load(spec: str, registered: dict[str, EntryPoint], options: dict[str, object]) -> Attack:
-    return _resolve(spec, registered)(**options)
+    return _checked_class(*_import(spec, registered))(**options)
 
 
-def _resolve(spec: str, registered: dict[str, EntryPoint]) -> type[Attack]:
-    """The attacker class of a registered name or file spec, with its class attributes checked."""
+def _import(spec: str, registered: dict[str, EntryPoint]) -> tuple[object, str, str | None]:
+    """The object a registered name or file spec points at, where it came from, and its registered name."""
     if _is_file_spec(spec):
-        obj, origin, registered_name = import_from_file(spec), spec, None
-    elif spec in registered:
+        return import_from_file(spec), spec, None
+    if spec in registered:
         ep = registered[spec]
-        obj, origin, registered_name = ep.load(), source_of(ep), spec
-    else:
-        raise _unknown(spec, registered)
+        return ep.load(), source_of(ep), spec
+    raise _unknown(spec, registered)
+
+
+def _checked_class(obj: object, origin: str, registered_name: str | None) -> type[Attack]:
+    """`obj` if it is an Attack subclass with a `name` (matching its registration) and a `threat_model`."""
     if not (isinstance(obj, type) and issubclass(obj, Attack)):
         raise TypeError(f"{origin}: {obj!r} is not a subclass of attacks.Attack")
     name = getattr(obj, "name", None)

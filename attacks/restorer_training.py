@@ -17,7 +17,6 @@ import hashlib
 import logging
 import time
 from collections.abc import Callable, Iterable
-from pathlib import Path
 from typing import Any
 
 import torch
@@ -190,7 +189,7 @@ def lens_key(lens: Any) -> Any:
 
 
 def load_or_train(model: nn.Module, artifacts: ArtifactStore | None, kind: str, key: dict[str, Any],
-                  train: Callable[[nn.Module], None]) -> bool:
+                  train: Callable[[nn.Module], object]) -> bool:
     """Load ``model``'s weights from the artifact store, or train them and store them.
 
     Args:

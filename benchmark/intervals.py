@@ -25,9 +25,10 @@ def plate_intervals(row: Row, outcomes: Sequence[PlateOutcome]) -> None:
     n = len(outcomes)
     if n == 0:
         return
-    for name, hits in (("plate_acc", sum(o.correct for o in outcomes)), ("plate_det", sum(o.detected for o in outcomes))):
+    hits = {"plate_acc": sum(o.correct for o in outcomes), "plate_det": sum(o.detected for o in outcomes)}
+    for name in hits:
         if name in row.metrics:
-            row.set_interval(name, *stats.wilson_interval(int(hits), n), "wilson")
+            row.set_interval(name, *stats.wilson_interval(int(hits[name]), n), "wilson")
     if "plate_cer" in row.metrics:
         by_scene: dict[str, list[float]] = {}
         for o in outcomes:

@@ -312,8 +312,8 @@ def _fit_meta(directory: Path, task: Task, ref: AttackerRef) -> dict:
 
 def _sample_grid(target: Target, out: Attacked, folder: Path) -> str:
     """One PNG: scene, PSF, sensor image and each restorer's output with its score; its file name."""
-    scores = {r.attack: f"PSNR {r.metrics['psnr_db']:.2f} dB, SSIM {r.metrics['ssim']:.3f}"
-              for r in out.rows if r.kind in ("restorer", "reference") and r.attack == r.restorer and "psnr_db" in r.metrics and "ssim" in r.metrics}
+    scores = {r.attack: f"PSNR {r.metrics['psnr_db']:.2f} dB, SSIM {r.metrics['ssim']:.3f}" for r in out.rows
+              if r.attack == r.restorer and "psnr_db" in r.metrics and "ssim" in r.metrics}
     def as_hwc(t: torch.Tensor):
         return t[0].permute(1, 2, 0).clamp(0, 1).numpy()
     name = f"samples_{target.lens_name}_seed{target.ctx.seed}.png".replace("/", "_")

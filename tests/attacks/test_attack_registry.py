@@ -136,3 +136,29 @@ def test_builtins_are_registered_by_entry_point():
         "gray-world": "attacks.gray_world:GrayWorld",
     }.items():
         assert registered.get(name) == target, f"pyproject.toml must register {name} = {target!r}"
+
+
+def test_a_file_plugin_named_like_a_registered_attacker_is_an_error_naming_both(tmp_path):
+    path = tmp_path / "dup.py"
+    path.write_text(PLUGIN_SOURCE.format(cls="Dup", name="identity"))
+    with pytest.raises(DuplicatePluginError, match=r"'identity' is defined twice") as info:
+        attacks.load_all([f"{path}:Dup"])
+    assert f"file {path}:Dup" in str(info.value) and "attacks.identity:Identity" in str(info.value)
+    first, second = tmp_path / "a.py", tmp_path / "b.py"
+    first.write_text(PLUGIN_SOURCE.format(cls="A", name="mine"))
+    second.write_text(PLUGIN_SOURCE.format(cls="B", name="mine"))
+    with pytest.raises(DuplicatePluginError, match=r"a\.py:A and by file .*b\.py:B"):
+        attacks.load_all([f"{first}:A", f"{second}:B"])
+
+
+@pytest.mark.parametrize("attribute, source", [
+    ("`name`", "import attacks\nclass X(attacks.Restorer):\n    threat_model = attacks.ThreatModel.SENSOR_ACCESS\n"
+               "    def restore(self, s):\n        return s\n"),
+    ("`threat_model`", "import attacks\nclass X(attacks.Restorer):\n    name = 'x'\n"
+                       "    def restore(self, s):\n        return s\n"),
+])
+def test_a_class_missing_a_required_attribute_names_it(tmp_path, attribute, source):
+    path = tmp_path / "x.py"
+    path.write_text(source)
+    loaded, failures = attacks.load_all([f"{path}:X"])
+    assert not loaded and attribute in failures[0].error and failures[0].kind == "restorer"

@@ -61,3 +61,16 @@ def test_second_fit_loads_from_cache(fake_lens, make_fake_lens, tmp_path):
     reseeded.fit(attacks.FitContext(lens=fake_lens, train_pairs=_pairs(), artifacts=ArtifactCache(tmp_path), seed=1))
     assert other.trained and reseeded.trained
     assert len(list(tmp_path.rglob("*.safetensors"))) == 3
+
+
+def test_truncated_cached_weights_are_reported_and_retrained(fake_lens, tmp_path, caplog):
+    ctx = attacks.FitContext(lens=fake_lens, train_pairs=_pairs(), artifacts=ArtifactCache(tmp_path), seed=0)
+    attacks.load("nafnet-known-pairs", backend="torch").fit(ctx)
+    (weights,) = tmp_path.rglob("*.safetensors")
+    good = weights.read_bytes()
+    weights.write_bytes(good[: len(good) // 2])
+    again = attacks.load("nafnet-known-pairs", backend="torch")
+    with caplog.at_level("WARNING"):
+        again.fit(ctx)
+    assert again.trained is True  # rebuilt, not reused
+    assert str(weights) in caplog.text and weights.read_bytes() == good  # same seed: the same weights again

@@ -259,14 +259,17 @@ def shared_cache_runs(tmp_path_factory):
     return cache, outs, procs
 
 
+def timing(key):
+    return key in TIMING or key.endswith("_s_per_image")
+
+
 def measured(out):
     """What a run measured: rows without timing or dates."""
     rows = []
     for r in read_results(out / "results.json").rows:
         d = r.to_json()
-        d["metrics"] = {k: v for k, v in d["metrics"].items() if k not in TIMING}
-        d["intervals"] = {k: v for k, v in d["intervals"].items() if k not in TIMING}
-        d["provenance"] = {k: v for k, v in d["provenance"].items() if k not in TIMING}
+        for part in ("metrics", "intervals", "provenance"):
+            d[part] = {k: v for k, v in d[part].items() if not timing(k)}
         rows.append(d)
     return rows
 
