@@ -6,7 +6,7 @@ Example (README; tests/benchmark/test_api.py runs exactly these lines)::
     print(benchmark.list_lenses(), benchmark.list_attacks())
     results = benchmark.run(lenses=["gp", "ideal"], attacks=["wiener-known-psf", "lpdr-oracle"], profile="smoke")
     table = results.table()  # pandas: one row per lens x attack x seed, metrics with 95 % intervals, status
-    print(table[["lens", "attack", "status", "psnr_db", "psnr_db_ci_low", "psnr_db_ci_high", "plate_acc"]])
+    print(table[["lens", "attack", "status", "psnr_db", "psnr_db_ci_low", "psnr_db_ci_high", "plate_acc"]].to_string())
 
 `run` validates every argument before any compute (errors name the argument and what would be
 valid), plans the tasks, executes them (here, or on Ray), and returns `Results`: the typed rows
@@ -264,8 +264,8 @@ def select_attackers(requested: Sequence[AttackerLike] | None, remote: bool) -> 
     sources: dict[str, str] = {}  # attacker name -> where it came from
     for item in requested:
         if isinstance(item, str):
-            ref = by_spec.get(item)
-            if ref is None:  # failed to load: a failure row already
+            ref = by_spec.pop(item, None)
+            if ref is None:  # failed to load (a failure row already), or named twice (as the CLI allows)
                 continue
             is_restorer, origin = kinds.get(item) == "restorer", f"{item!r}"
         else:

@@ -223,3 +223,22 @@ def test_load_lens_and_lists():
 def test_import_benchmark_stays_cheap():
     code = "import sys, benchmark; assert 'torch' not in sys.modules and 'benchmark.api' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+
+
+def test_a_name_given_twice_runs_once_and_objects_keep_their_place():
+    chosen = api.select_attackers(["identity", Flat(0.3), "lpdr-oracle", "identity", Passthrough], remote=False)
+    assert [r.name for r in chosen.restorers] == ["identity", "test-flat", "test-passthrough"]
+    assert [r.name for r in chosen.readers] == ["lpdr-oracle"] and chosen.failures == []
+
+
+def test_a_class_whose_constructor_raises_is_a_load_failure_not_a_crash():
+    class Broken(Passthrough):
+        name: ClassVar[str] = "test-broken"
+
+        def __init__(self) -> None:
+            raise RuntimeError("no weights here")
+
+    chosen = api.select_attackers([Broken, "identity"], remote=False)
+    assert [r.name for r in chosen.restorers] == ["identity"]
+    assert [(f.name, f.kind, f.error) for f in chosen.failures] == [("test-broken", "restorer",
+                                                                     "RuntimeError: no weights here")]
