@@ -162,7 +162,8 @@ class Results:
 def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = None, *,
         profile: str | Profile = "quick", seeds: int | Sequence[int] = (0,), scenes: str = "synthetic",
         device: str = "cpu", out: str | Path | None = None, executor: str = "local",
-        plate_format: str | None = None, frames: int = 30, meta: Mapping[str, Any] | None = None) -> Results:
+        plate_format: str | None = None, frames: int = 30, budget_s: float | None = None,
+        meta: Mapping[str, Any] | None = None) -> Results:
     """Benchmark `lenses` against `attacks`; the CLI's `run` with the same meanings.
 
     Args:
@@ -177,6 +178,8 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         executor: "local" (this process), "ray" (a local Ray instance), "ray:auto" or "ray://HOST:PORT".
         plate_format: Plate strings the privacy bound counts (L letter, D digit); None: the scenes'.
         frames: Frames of a static plate for the video bound (>= 1).
+        budget_s: Wall-time budget (s) of each expensive step (an attacker's fit, restore or read;
+            the bound); a step past it gives a failed row. None: no budget.
         meta: Extra facts stored in results.json's meta (the CLI stores its command line).
 
     Returns:
@@ -186,7 +189,8 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         ValueError (and LookupError subclasses for unknown names): a bad argument, before any compute.
     """
     git_commit()  # pinned now, as the code was imported: later commits do not re-stamp this run
-    cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames)
+    cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames,
+                                budget_s)
     folder, created = prepare_out(Path(out)) if out is not None else (None, False)
     log.info("profile %s: %s", cfg.profile.name, cfg.profile.to_dict())
     t0 = time.perf_counter()
@@ -206,7 +210,7 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
 
 def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike] | None, profile: str | Profile,
                seeds: int | Sequence[int], scenes: str, device: str, executor: str, plate_format: str | None,
-               frames: int) -> tuple[RunConfig, runner.Selection]:
+               frames: int, budget_s: float | None) -> tuple[RunConfig, runner.Selection]:
     """Check every argument (before any compute) and choose the attackers."""
     p = _profile(profile)
     names = [str(lens_names)] if isinstance(lens_names, (str, Path)) else [str(n) for n in lens_names]
@@ -223,11 +227,14 @@ def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike
     plate_entropy_bits(plate_format)  # validates the format before any work
     if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
         raise ValueError(f"frames must be an integer >= 1, got {frames!r}")
+    if budget_s is not None and (isinstance(budget_s, bool) or not isinstance(budget_s, (int, float))
+                                 or not budget_s > 0):
+        raise ValueError(f"budget_s must be None or a number of seconds > 0, got {budget_s!r}")
     executors.get(executor)  # fails fast on a bad name or a missing Ray
     selection = select_attackers(requested, remote=executor != "local")
     cfg = RunConfig(lenses=names, attacks=[r.spec for r in selection.restorers + selection.readers],
                     scenes=scenes, profile=p, seeds=_seeds(seeds), device=_device(device),
-                    plate_format=plate_format, frames=frames)
+                    plate_format=plate_format, frames=frames, budget_s=budget_s)
     return cfg, selection
 
 
@@ -405,14 +412,15 @@ class Plan:
 def plan(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = None, *,
          profile: str | Profile = "quick", seeds: int | Sequence[int] = (0,), scenes: str = "synthetic",
          device: str = "cpu", executor: str = "local", plate_format: str | None = None,
-         frames: int = 30) -> Plan:
+         frames: int = 30, budget_s: float | None = None) -> Plan:
     """The dry run of `run` with the same arguments: its tasks, which are cached, what each costs.
 
     Computes nothing and writes nothing (the attackers are constructed, to know their kinds).
     A task's cost is the median wall time measured for the same work (kind, lens, attackers,
     profile settings, scenes, device; any seed) in the cache, or unknown.
     """
-    cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames)
+    cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames,
+                                budget_s)
     directory = run_directory(cfg, selection.restorers, selection.readers)
     measured = task_costs.measurements(cfg.cache_dir)
     planned = []

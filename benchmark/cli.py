@@ -27,6 +27,16 @@ def _seeds(text: str) -> list[int]:
     return seeds
 
 
+def _budget(text: str) -> float:
+    try:
+        seconds = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--budget-s must be a number of seconds, got {text!r}") from None
+    if not seconds > 0:
+        raise argparse.ArgumentTypeError(f"--budget-s must be > 0 seconds, got {text!r}")
+    return seconds
+
+
 def _device(text: str) -> str:
     import torch
     if text == "cpu":
@@ -58,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="also write one leaderboard entry per lens to leaderboard/entries/ and re-render it")
     run.add_argument("--plate-format", default=None, metavar="FORMAT",
                      help="plate strings the privacy bound counts: L = letter, D = digit (default: the scene generator's)")
+    run.add_argument("--budget-s", type=_budget, default=None, metavar="SECONDS",
+                     help="wall-time budget of each expensive step (an attacker's fit, restore or read; the bound): "
+                          "a step past it gives a failed row with a clear message (default: none)")
     run.add_argument("--frames", type=int, default=30, metavar="T",
                      help="frames of a static plate for the video bound (default 30; T = 1 is always reported)")
     run.add_argument("--dry-run", action="store_true",
@@ -129,7 +142,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     options = dict(lenses=args.lens, attacks=args.attack, profile=args.profile, seeds=args.seeds,
                    scenes=args.scenes, device=args.device, executor=args.executor,
-                   plate_format=args.plate_format, frames=args.frames)
+                   plate_format=args.plate_format, frames=args.frames, budget_s=args.budget_s)
     if args.dry_run:
         print(api.plan(**options).render())
         return 0

@@ -14,9 +14,11 @@ from dataclasses import dataclass, field
 from typing import TypeVar
 
 import torch
+from tqdm.auto import tqdm
 
 import attacks
 import lenses
+from benchmark.budget import time_budget
 from benchmark.intervals import plate_intervals, scene_intervals
 from benchmark.metrics import psnr, ssim
 from benchmark.plates import PlateOutcome, score_scene, summarise
@@ -37,10 +39,12 @@ class OutputError(ValueError):
     """An attacker returned something other than what its contract promises."""
 
 
-def attempt(attacker: str, stage: str, work: Callable[[], T]) -> T | RowError:
-    """Run `work`; any exception becomes the RowError of `attacker` at `stage` (and is logged)."""
+def attempt(attacker: str, stage: str, work: Callable[[], T], budget_s: float | None = None) -> T | RowError:
+    """Run `work` within `budget_s` seconds (None: no limit); any exception, or running out of
+    time, becomes the RowError of `attacker` at `stage` (and is logged)."""
     try:
-        return work()
+        with time_budget(budget_s, f"{attacker} ({stage})"):
+            return work()
     except Exception as exc:  # noqa: BLE001 - a broken plugin must not take the run down
         log.warning("attacker %r failed at %s: %s: %s", attacker, stage, type(exc).__name__, exc)
         return RowError(attacker, stage, f"{type(exc).__name__}: {exc}")
@@ -152,7 +156,7 @@ class Attacked:
 def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dict[str, dict], cfg: RunConfig,
                   rows: RowBuilder, out: Attacked) -> None:
     """Restore with each restorer (fitted by its own task: `fitted[name]` = that task's meta) and score it."""
-    for attacker in restorers:
+    for attacker in tqdm(restorers, desc=f"{target.lens_name} restorers", leave=False):
         # A reference (e.g. the uncorrected image) is reported, but never as an attack.
         kind = "reference" if getattr(attacker, "reference", False) else "restorer"
         settings = {"restorer": attacker.describe()}
@@ -164,10 +168,13 @@ def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dic
             out.rows.append(rows.failed(kind, attacker.name, RowError(**meta["error"]), restorer=attacker.name,
                                         settings=settings))
             continue
-        error = attempt(attacker.name, "fit", lambda: attacker.fit(target.ctx))  # a cache hit after the fit task
+        t0 = time.perf_counter()
+        error = attempt(attacker.name, "fit", lambda: attacker.fit(target.ctx), cfg.budget_s)  # normally a cache hit
+        fit_s = meta.get("fit_s", time.perf_counter() - t0)  # fitted here when its task's result was not kept
         t0 = time.perf_counter()
         restored = error if isinstance(error, RowError) else attempt(
-            attacker.name, "restore", lambda: restore_all(attacker, target.sensor, cfg.profile.batch_size, cfg.device))
+            attacker.name, "restore", lambda: restore_all(attacker, target.sensor, cfg.profile.batch_size, cfg.device),
+            cfg.budget_s)
         if isinstance(restored, RowError):
             out.rows.append(rows.failed(kind, attacker.name, restored, restorer=attacker.name, settings=settings))
             continue
@@ -177,7 +184,7 @@ def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dic
         if kind == "reference":
             out.references.add(attacker.name)
         metrics, per_image = restoration_metrics(restored, target.sharp)
-        metrics.update({"fit_s": float(meta.get("fit_s", 0.0)), "images_per_s": target.sharp.shape[0] / run_s})
+        metrics.update({"fit_s": float(fit_s), "images_per_s": target.sharp.shape[0] / run_s})
         row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
                        threat_model=attacker.threat_model.value, settings={"restorer": attacker.describe()})
         scene_intervals(row, per_image, seed=row.seed)
@@ -188,8 +195,8 @@ def run_reader(target: Target, reader: attacks.Reader, cfg: RunConfig, rows: Row
     """Read with `reader` on the sensor images and on every restored set; score each chain."""
     sources = {reader.name: (None, target.sensor),
                **{chain_name(name, reader.name): (name, images) for name, images in out.restored.items()}}
-    fit_error = attempt(reader.name, "fit", lambda: reader.fit(target.ctx))
-    for chain, (restorer, images) in sources.items():
+    fit_error = attempt(reader.name, "fit", lambda: reader.fit(target.ctx), cfg.budget_s)
+    for chain, (restorer, images) in tqdm(sources.items(), desc=f"{target.lens_name} {reader.name}", leave=False):
         kind = "reader" if restorer is None else "reference" if restorer in out.references else "chain"
         settings = {"reader": reader.describe(), **({"restorer": out.described[restorer]} if restorer else {})}
         if isinstance(fit_error, RowError):
@@ -200,7 +207,8 @@ def run_reader(target: Target, reader: attacks.Reader, cfg: RunConfig, rows: Row
         # restored images with the clean one.
         segment = target.segment_sensor if restorer is None else target.segment_restored
         result = attempt(reader.name, "read", lambda: read_plates(reader, images, target.scenes,
-                                                                   cfg.profile.batch_size, cfg.device, segment))
+                                                                   cfg.profile.batch_size, cfg.device, segment),
+                         cfg.budget_s)
         if isinstance(result, RowError):
             out.rows.append(rows.failed(kind, chain, result, restorer=restorer, reader=reader.name, settings=settings))
             continue

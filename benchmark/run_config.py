@@ -21,6 +21,7 @@ class RunConfig:
     cache_dir: Path = field(default_factory=cache_root)
     plate_format: str = PLATE_FORMAT   # the plate strings the bound's entropy counts
     frames: int = 30                   # T of the video bound (T = 1 is always reported)
+    budget_s: float | None = None      # wall-time budget of each expensive step (attacker stages, bound)
 
 
 def training_scenes(scene_set: str) -> str:

@@ -102,7 +102,7 @@ def run(cfg: RunConfig, executor: str = "local", selection: Selection | None = N
         out.pictures.extend(directory / task.key / name for name in result.meta.get("pictures", []))
         if task.kind == "lens" and task.lens not in out.lens_info:
             out.lens_info[task.lens] = {k: result.meta[k] for k in ("coefficients_um", "spec")}
-        if task.kind == "bound" and task.lens not in out.bound_curves:
+        if task.kind == "bound" and task.lens not in out.bound_curves and "curve" in result.meta:
             curve = result.meta["curve"]
             out.bound_curves[task.lens] = (curve["width_px"], curve["ceiling"])
     out.failed = [r for r in out.rows if not r.ok]

@@ -52,8 +52,9 @@ __all__ = [
 SCHEMA_VERSION = 2
 KINDS = ("lens", "utility", "bound", "restorer", "reader", "chain", "reference")
 STATUSES = ("ok", "failed")
-# Where an attacker can fail; a failed row names one of these.
-STAGES = ("load", "fit", "restore", "read", "score")
+# Where a row can fail: an attacker's stages, and "measure" for the suite's own measurements
+# (e.g. the bound running past its budget). A failed row names one of these.
+STAGES = ("load", "fit", "restore", "read", "score", "measure")
 SHARP_LENS = "sharp"
 CHAIN_SEPARATOR = ">"
 # Kinds whose `attack` is the kind itself (no attacker involved).

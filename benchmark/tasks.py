@@ -26,6 +26,7 @@ import attacks
 import lenses
 from benchmark import task_costs
 from benchmark.attacker_objects import load as load_attacker
+from benchmark.budget import BudgetExceeded, time_budget
 from benchmark.cache import CHECKSUM_SUFFIX, ArtifactCache, discard, exclusive, read_verified, write_verified
 from benchmark.charts.plates import write_plate_gallery
 from benchmark.evaluation import Attacked, Target, attempt, run_reader, run_restorers
@@ -59,6 +60,12 @@ class TaskResult:
     plates: list[dict] = field(default_factory=list)
     meta: dict = field(default_factory=dict)
 
+    @property
+    def has_failures(self) -> bool:
+        """True when a row failed or the task recorded an error: such a result is not reused by a
+        later run (the attacker may have been fixed since), only within the run that made it."""
+        return "error" in self.meta or any(not r.ok for r in self.rows)
+
     def to_json(self) -> dict[str, Any]:
         return {"rows": [r.to_json() for r in self.rows], "settings": self.settings, "plates": self.plates,
                 "meta": self.meta}
@@ -83,15 +90,21 @@ def load_result(directory: Path, task: Task) -> TaskResult | None:
 
 
 def is_cached(directory: Path, task: Task) -> bool:
-    """Whether the task's result is stored and matches its checksum. Read-only, unlike
-    `load_result` (a corrupt result stays for the run to report), so a dry run changes nothing."""
+    """Whether a run would reuse the task's stored result: present, matching its checksum, readable
+    and without failures (see `execute`). Read-only, unlike `load_result` (a corrupt result stays
+    for the run to report), so a dry run changes nothing."""
     path = directory / task.key / RESULT_FILE
     try:
         data = path.read_bytes()
         expected = path.with_name(path.name + CHECKSUM_SUFFIX).read_text().strip()
     except FileNotFoundError:
         return False
-    return hashlib.sha256(data).hexdigest() == expected
+    if hashlib.sha256(data).hexdigest() != expected:
+        return False
+    try:
+        return not TaskResult.from_json(json.loads(data)).has_failures
+    except (ValueError, KeyError, TypeError):  # verified bytes of an older layout
+        return False
 
 
 def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
@@ -99,14 +112,15 @@ def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
 
     The per-task lock lets one run compute while others sharing the cache wait and read its
     result; staging folders are removed only under that lock, i.e. only when their owner is gone.
+    A stored result with failures is computed again.
     """
     done = load_result(directory, task)
-    if done is not None:
+    if done is not None and not done.has_failures:
         return done
     directory.mkdir(parents=True, exist_ok=True)
     with exclusive(directory / f".{task.key}.lock"):
         done = load_result(directory, task)  # another run finished it while this one waited
-        if done is not None:
+        if done is not None and not done.has_failures:
             return done
         for stale in directory.glob(f".{task.key}.staging-*"):  # left by a run that died mid-task
             shutil.rmtree(stale, ignore_errors=True)
@@ -120,7 +134,7 @@ def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
         task_costs.record(staging, task, cfg, wall_s)  # what a dry run's estimates are made of
         write_verified(staging / RESULT_FILE, json.dumps(result.to_json(), default=str, allow_nan=False).encode())
         final = directory / task.key
-        if final.exists():  # a corrupt result, found and discarded above
+        if final.exists():  # a corrupt result, or one with failures
             shutil.rmtree(final)
         os.replace(staging, final)
     loaded = load_result(directory, task)
@@ -245,14 +259,18 @@ def _bound(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     lens = _lens(cfg, task.lens, task.seed)
     spectrum = cached_plate_spectrum(cfg.cache_dir, cfg.profile.bound_scenes, seed=task.seed)
     bits = plate_entropy_bits(cfg.plate_format)
+    builder = _builder(cfg, task.lens, task.seed, lens, plate_format=cfg.plate_format, frames=cfg.frames)
     t0 = time.perf_counter()
-    values = bound_row(lens, spectrum, bits, frames=tuple(sorted({1, cfg.frames})))
+    try:
+        with time_budget(cfg.budget_s, f"the bound of lens {task.lens!r}"):
+            values = bound_row(lens, spectrum, bits, frames=tuple(sorted({1, cfg.frames})))
+            curve = bound_curve(lens, spectrum, BOUND_CURVE_WIDTHS_PX, bits)
+    except BudgetExceeded as exc:
+        return TaskResult([builder.failed("bound", "bound", RowError("bound", "measure", str(exc)))], builder.settings)
     metrics = {k: float(v) for k, v in values.items() if not isinstance(v, str)}
     metrics["fit_s"] = time.perf_counter() - t0
     notes = {k: v for k, v in values.items() if isinstance(v, str)}
     notes["bound_plate_format"] = cfg.plate_format
-    builder = _builder(cfg, task.lens, task.seed, lens, plate_format=cfg.plate_format, frames=cfg.frames)
-    curve = bound_curve(lens, spectrum, BOUND_CURVE_WIDTHS_PX, bits)
     return TaskResult([builder.row("bound", metrics, notes=notes)], builder.settings,
                       meta={"curve": {k: [float(x) for x in v] for k, v in curve.items()}})
 
@@ -268,7 +286,7 @@ def _fit(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     if reason:
         return TaskResult(meta={"skipped": reason})
     t0 = time.perf_counter()
-    error = attempt(ref.name, "fit", lambda: attacker.fit(ctx))
+    error = attempt(ref.name, "fit", lambda: attacker.fit(ctx), cfg.budget_s)
     if isinstance(error, RowError):
         return TaskResult(meta={"error": error.to_json()})
     return TaskResult(meta={"fit_s": time.perf_counter() - t0})
@@ -304,10 +322,10 @@ def _evaluate(task: Task, cfg: RunConfig, staging: Path) -> TaskResult:
 
 
 def _fit_meta(directory: Path, task: Task, ref: AttackerRef) -> dict:
+    """The meta of the restorer's fit task; {} when another run is just redoing it (the evaluate
+    task then fits the restorer itself)."""
     done = load_result(directory, fit_task(task.seed, task.lens, ref))
-    if done is None:
-        raise RuntimeError(f"task {task.key} ran before the fit of {ref.name!r} finished; the executor broke the order")
-    return done.meta
+    return {} if done is None else done.meta
 
 
 def _sample_grid(target: Target, out: Attacked, folder: Path) -> str:

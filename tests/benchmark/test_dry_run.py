@@ -6,7 +6,9 @@ import subprocess
 import sys
 
 import pytest
+import torch
 
+import attacks
 import benchmark
 from benchmark.schema import read_results
 
@@ -77,3 +79,22 @@ def test_a_corrupt_result_is_planned_for_compute_and_left_for_the_run_to_report(
     states = {t.key: t.state for t in benchmark.plan(lenses=["ideal"], attacks=["identity"], profile="smoke").tasks}
     assert states == {k: "compute" if k == "bound_s0_ideal" else "cached" for k in TASKS}
     assert result.exists()  # a dry run removes nothing
+
+
+class FailsToRestore(attacks.Restorer):
+    """Raises in restore: its evaluate task stores a failed row."""
+
+    name = "test-fails-to-restore"
+    threat_model = attacks.ThreatModel.SENSOR_ACCESS
+
+    def restore(self, sensor: torch.Tensor) -> torch.Tensor:
+        raise RuntimeError("injected")
+
+
+def test_a_result_with_failures_is_planned_for_compute(plans, monkeypatch):
+    monkeypatch.setenv("PLB_CACHE", str(plans["root"] / "cache"))
+    results = benchmark.run(lenses=["ideal"], attacks=[FailsToRestore], profile="smoke")
+    assert [r.error.stage for r in results.failed] == ["restore"]
+    states = {t.key: t.state for t in benchmark.plan(lenses=["ideal"], attacks=[FailsToRestore], profile="smoke").tasks}
+    assert states.pop("evaluate_s0_ideal") == "compute"  # a later run recomputes a result with failures
+    assert set(states.values()) == {"cached"}

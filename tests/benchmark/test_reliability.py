@@ -87,6 +87,19 @@ class ReadRaises(Reader):
         raise RuntimeError("read exploded")
 
 
+class Slow(Restorer):
+    """A fit that would take five minutes (a lens that makes training explode)."""
+    name: ClassVar[str] = "slow"
+    threat_model: ClassVar[ThreatModel] = ThreatModel.SENSOR_ACCESS
+
+    def fit(self, ctx):
+        import time
+        time.sleep(300)
+
+    def restore(self, sensor):
+        return sensor
+
+
 class NoName(Restorer):
     threat_model: ClassVar[ThreatModel] = ThreatModel.SENSOR_ACCESS
 
@@ -126,8 +139,9 @@ def faulty_run(plugin_file, tmp_path_factory):
     out = tmp_path_factory.mktemp("faulty")
     p = plugin_file / "plugins.py"
     specs = ["identity", f"{p}:Sharpen", f"{p}:Echo", f"{p}:FitRaises", f"{p}:RestoreRaises", f"{p}:Nan",
-             f"{p}:WrongShape", f"{p}:ReadRaises", f"{p}:NoName", f"{plugin_file / 'bad_import.py'}:Anything"]
-    args = ["--lens", "defocus", "--out", str(out)]
+             f"{p}:WrongShape", f"{p}:ReadRaises", f"{p}:Slow", f"{p}:NoName",
+             f"{plugin_file / 'bad_import.py'}:Anything"]
+    args = ["--lens", "defocus", "--out", str(out), "--budget-s", "30"]
     for spec in specs:
         args += ["--attack", spec]
     proc = benchmark_run(args, tmp_path_factory.mktemp("cache-faulty"))
@@ -158,6 +172,7 @@ def test_the_other_rows_are_complete(faulty_run):
     ("nan", "restore", "non-finite"),
     ("wrong-shape", "restore", "shape"),
     ("read-raises", "read", "read exploded"),
+    ("slow", "fit", "budget of 30 s"),
 ])
 def test_a_failing_attacker_is_a_failed_row_without_metrics(faulty_run, attack, stage, text):
     _, rows = faulty_run
@@ -170,7 +185,7 @@ def test_chains_of_a_failing_reader_fail_and_failed_restorers_are_not_chained(fa
     _, rows = faulty_run
     assert rows["defocus", "sharpen>read-raises"].status == "failed"
     assert rows["sharp", "read-raises"].status == "failed"
-    assert not any(a.startswith(("nan>", "wrong-shape>", "fit-raises>")) for _, a in rows)
+    assert not any(a.startswith(("nan>", "wrong-shape>", "fit-raises>", "slow>")) for _, a in rows)
 
 
 def test_plugins_that_fail_to_load_are_failed_rows_naming_why(faulty_run, plugin_file):
@@ -186,7 +201,7 @@ def test_the_run_exits_non_zero_with_a_summary(faulty_run):
     assert proc.returncode == 1, proc.stderr[-2000:]
     failed = [r for r in rows.values() if not r.ok]
     assert f"{len(failed)} row(s) failed" in proc.stderr
-    for attack in ("fit-raises", "restore-raises", "nan", "wrong-shape", "read-raises"):
+    for attack in ("fit-raises", "restore-raises", "nan", "wrong-shape", "read-raises", "slow"):
         assert f"{attack} failed at" in proc.stderr
 
 
@@ -217,11 +232,12 @@ def test_unwritable_out_fails_before_any_compute(tmp_path):
     assert not (tmp_path / "cache" / "tasks").exists()
 
 
-@pytest.mark.parametrize("seeds", ["0,,1", "0,", "a", "1,1"])
-def test_malformed_seeds_are_rejected(seeds, tmp_path):
-    proc = benchmark_run(["--lens", "ideal", "--seeds", seeds, "--out", str(tmp_path / "o")], tmp_path / "c",
+@pytest.mark.parametrize("option, value", [("--seeds", "0,,1"), ("--seeds", "0,"), ("--seeds", "a"),
+                                           ("--seeds", "1,1"), ("--budget-s", "0"), ("--budget-s", "soon")])
+def test_malformed_seeds_and_budgets_are_rejected(option, value, tmp_path):
+    proc = benchmark_run(["--lens", "ideal", option, value, "--out", str(tmp_path / "o")], tmp_path / "c",
                          timeout=120)
-    assert proc.returncode == 2 and "--seeds" in proc.stderr
+    assert proc.returncode == 2 and option in proc.stderr
 
 
 def test_a_failed_early_run_leaves_no_output_folder(tmp_path):
@@ -280,6 +296,26 @@ def test_two_runs_on_one_cache_both_complete_and_agree(shared_cache_runs):
         assert proc.returncode == 0, proc.stderr[-3000:]
     a, b = measured(outs[0]), measured(outs[1])
     assert a == b and len(a) >= 8
+
+
+def test_results_with_failures_are_not_reused_by_a_later_run(tmp_path, monkeypatch):
+    from benchmark import tasks
+    from benchmark.planning import Task
+    from benchmark.schema import Row, RowError
+
+    calls = []
+
+    def body(task, cfg, staging):  # fails the first time, as a plugin fixed in between would
+        calls.append(task.key)
+        if len(calls) == 1:
+            return tasks.TaskResult([Row.failed("lens", "l", "lens", 0, "smoke", "s", RowError("x", "fit", "boom"))])
+        return tasks.TaskResult([Row(kind="lens", attack="lens", lens="l", seed=0, profile="smoke", scenes="s")])
+
+    monkeypatch.setitem(tasks._KINDS, "test-kind", body)
+    task = Task("test-kind", 0)
+    assert tasks.execute(task, None, tmp_path).has_failures
+    assert not tasks.execute(task, None, tmp_path).has_failures  # computed again: now it works
+    assert not tasks.execute(task, None, tmp_path).has_failures and len(calls) == 2  # and then reused
 
 
 def test_corrupt_task_results_are_reported_and_rebuilt(shared_cache_runs, tmp_path):

@@ -1,0 +1,46 @@
+"""The time budget ends a step that runs too long, with a message naming it."""
+
+import threading
+import time
+
+import pytest
+
+from benchmark.budget import BudgetExceeded, time_budget
+from benchmark.evaluation import attempt
+
+
+def test_a_step_past_its_budget_is_ended_with_its_name():
+    t0 = time.perf_counter()
+    with pytest.raises(BudgetExceeded, match=r"the bound of lens 'dark' ran past its budget of 0.2 s"):
+        with time_budget(0.2, "the bound of lens 'dark'"):
+            time.sleep(30)
+    assert time.perf_counter() - t0 < 5
+
+
+def test_a_step_within_its_budget_is_untouched_and_the_timer_is_cleared():
+    with time_budget(5, "quick"):
+        time.sleep(0.05)
+    time.sleep(0.1)  # no stray alarm afterwards
+
+
+def test_no_budget_and_other_threads_run_unbounded():
+    with time_budget(None, "x"):
+        time.sleep(0.05)
+    errors = []
+
+    def worker():
+        try:
+            with time_budget(0.01, "x"):
+                time.sleep(0.1)
+        except BaseException as exc:  # noqa: BLE001 - the test records anything
+            errors.append(exc)
+
+    t = threading.Thread(target=worker)
+    t.start()
+    t.join()
+    assert errors == []
+
+
+def test_an_attacker_past_its_budget_is_a_failed_row_error():
+    error = attempt("slow", "fit", lambda: time.sleep(30), budget_s=0.2)
+    assert error.attacker == "slow" and error.stage == "fit" and "budget of 0.2 s" in error.message
