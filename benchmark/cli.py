@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
-import json
 import logging
 import os
-import shutil
+import json
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -79,6 +77,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "a step past it gives a failed row with a clear message (default: none)")
     run.add_argument("--frames", type=int, default=30, metavar="T",
                      help="frames of a static plate for the video bound (default 30; T = 1 is always reported)")
+    run.add_argument("--dry-run", action="store_true",
+                     help="print the task plan (cached or to compute, measured cost per task) and compute nothing")
     train = sub.add_parser("train", help="train (or load) a co-designed lens; under torchrun, data-parallel over the ranks")
     train.add_argument("--lens", required=True, choices=_codesign_lenses(), help="co-design scheme registered as a lens")
     train.add_argument("--profile", default="quick", choices=list(PROFILES), help="run size (default: quick)")
@@ -162,84 +162,27 @@ def cmd_list() -> int:
     return 0
 
 
-def prepare_out(path: Path | None) -> tuple[Path, bool]:
-    """The output folder (default runs/<date-time>), created and checked writable before any
-    compute; and whether it was created now (so a run that fails early can remove it again)."""
-    out = path or Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {str(out)!r} is a file; give a folder (it is created if missing)")
-    created = not out.exists()
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out):
-            pass
-    except OSError as exc:
-        raise ValueError(f"--out {str(out)!r} is not a writable folder ({exc.strerror or exc})") from None
-    return out, created
-
-
 def cmd_run(args: argparse.Namespace) -> int:
-    import lenses
-    from benchmark import executors, runner
+    from benchmark import api
     from benchmark.profiles import get_profile
-    from benchmark.provenance import git_commit
-    from benchmark.run_config import RunConfig
-    from benchmark.scenes import PLATE_FORMAT, load_scenes, plate_entropy_bits
 
-    git_commit()  # pinned now, as the code was imported: later commits do not re-stamp this run
-
-    # Every check that can fail runs before the output folder exists and before any compute.
-    profile = get_profile(args.profile)
-    known = lenses.available()
-    for name in args.lens:  # fail before any work on a typo or a bad spec field
-        if name.endswith(".toml") or Path(name).is_file():
-            lenses.load_spec(name)
-        elif name not in known:
-            lenses.load(name)
-    load_scenes(args.scenes, "val", 0, profile.image_size, 0)  # validates the scene set name
-    plate_format = args.plate_format or PLATE_FORMAT
-    plate_entropy_bits(plate_format)  # validates the format before any work
-    if args.frames < 1:
-        raise ValueError(f"--frames must be >= 1, got {args.frames}")
-    executors.get(args.executor)  # fails fast on a bad name or a missing Ray
-    selection = runner.select_attackers(args.attack)
-    cfg = RunConfig(lenses=args.lens, attacks=args.attack, scenes=args.scenes, profile=profile,
-                    seeds=args.seeds, device=args.device, plate_format=plate_format, frames=args.frames,
-                    budget_s=args.budget_s)
-    out, created = prepare_out(args.out)
-    print(f"profile {profile.name}: {json.dumps(profile.to_dict())}")
-    try:
-        t0 = time.perf_counter()
-        result = runner.run(cfg, executor=args.executor, selection=selection)
-    except BaseException:
-        if created and not any(out.iterdir()):
-            out.rmdir()
-        raise
-    meta = {"command": sys.argv, "profile": profile.to_dict(), "executor": args.executor,
-            "wall_s": time.perf_counter() - t0}
-    write_run_outputs(out, result, meta)
+    options = dict(lenses=args.lens, attacks=args.attack, profile=args.profile, seeds=args.seeds,
+                   scenes=args.scenes, device=args.device, executor=args.executor,
+                   plate_format=args.plate_format, frames=args.frames, budget_s=args.budget_s)
+    if args.dry_run:
+        print(api.plan(**options).render())
+        return 0
+    out = args.out or Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    results = api.run(**options, out=out, meta={"command": sys.argv})
+    print((out / "table.md").read_text())
     if args.publish:
         from benchmark import leaderboard
-        paths = leaderboard.publish_run(result.rows, profile.to_dict(), result.lens_info, out,
-                                        settings=result.settings)
+        output = results.output
+        paths = leaderboard.publish_run(output.rows, get_profile(args.profile).to_dict(), output.lens_info, out,
+                                        settings=output.settings)
         print(f"published {len(paths)} leaderboard entries; rendered the leaderboard")
-    print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({meta['wall_s']:.1f} s)")
-    return report_failures(result.failed)
-
-
-def write_run_outputs(out: Path, result, meta: dict) -> None:
-    """results.json (schema rows + their settings), tables, pictures and charts of a run."""
-    from benchmark import report
-    from benchmark.charts.run_charts import write_run_charts
-    from benchmark.schema import Results, write_results
-    write_results(out / "results.json", Results(result.rows, result.settings, meta))
-    for picture in result.pictures:
-        shutil.copyfile(picture, out / picture.name)
-    if result.plates:
-        report.write_plate_records(out, result.plates)
-    write_run_charts(out, result.rows, result.plates, result.bound_curves)
-    report.write_tables(out, result.rows)
-    print((out / "table.md").read_text())
+    print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({results.meta['wall_s']:.1f} s)")
+    return report_failures(results.failed)
 
 
 def report_failures(failed: list) -> int:
