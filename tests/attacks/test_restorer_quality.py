@@ -6,8 +6,11 @@ PSNR in dB:
              nafnet-generic 20.6
     defocus: identity 16.5, wiener 21.3, richardson-lucy 21.8, nafnet-known-pairs 18.9,
              nafnet-generic 18.0
-(identity is low on both because of the sensor tint.) The whole module takes ~6 s on one
-free core.
+(identity was then the uncorrected image, now the `raw` reference; it is low on both because of
+the sensor tint.) The baseline here stays `raw`. Against the white-balanced `identity`
+(divided by the sensor's gain) the same run measures ideal 24.8 and defocus 19.4 dB, so
+wiener gains 0.3 / 1.9 dB and nafnet-known-pairs (40 steps) loses 2.1 / 0.5 dB. The whole
+module takes ~6 s on one free core.
 The asserted margins on defocus are about half the measured gains.
 """
 
@@ -37,7 +40,7 @@ def scenes() -> torch.Tensor:
 
 @pytest.fixture(scope="module")
 def psnr_by_lens(scenes, tmp_path_factory) -> dict[str, dict[str, float]]:
-    """Mean PSNR of identity and every restorer on each lens, fitted as the runner fits them."""
+    """Mean PSNR of raw and every restorer on each lens, fitted as the runner fits them."""
     cache = tmp_path_factory.mktemp("cache")
     cfg = RunConfig(lenses=[], attacks=None, scenes="synthetic", profile=PROFILE, seeds=[0], cache_dir=cache)
     results: dict[str, dict[str, float]] = {}
@@ -47,7 +50,7 @@ def psnr_by_lens(scenes, tmp_path_factory) -> dict[str, dict[str, float]]:
         ctx = attacks.FitContext(lens=lens, train_pairs=train_pairs_factory(lens, cfg, 0),
                                  artifacts=ArtifactCache(cache), seed=0, profile=PROFILE)
         results[lens_name] = {}
-        for name in ["identity", *RESTORERS]:
+        for name in ["raw", *RESTORERS]:
             # The torch backend: ONNX export and timing cost time here and are tested elsewhere.
             attack = attacks.load(name, backend="torch") if name.startswith("nafnet") else attacks.load(name)
             attack.fit(ctx)
@@ -59,10 +62,10 @@ def psnr_by_lens(scenes, tmp_path_factory) -> dict[str, dict[str, float]]:
 @pytest.mark.parametrize("name", RESTORERS)
 def test_sharp_lens_is_not_made_worse(psnr_by_lens, name):
     ideal = psnr_by_lens["ideal"]
-    assert ideal[name] >= ideal["identity"] - 1.0, ideal
+    assert ideal[name] >= ideal["raw"] - 1.0, ideal
 
 
 @pytest.mark.parametrize("name", sorted(MARGIN_ON_DEFOCUS_DB))
 def test_defocus_is_restored(psnr_by_lens, name):
     defocus = psnr_by_lens["defocus"]
-    assert defocus[name] >= defocus["identity"] + MARGIN_ON_DEFOCUS_DB[name], defocus
+    assert defocus[name] >= defocus["raw"] + MARGIN_ON_DEFOCUS_DB[name], defocus
