@@ -81,26 +81,24 @@ def plate_windows(frames: list[Scene], is_scored: Callable[[Plate], bool], min_s
 
 
 def window_scene(frame: Scene, window: PlateWindow) -> Scene:
-    """The window as a scene record: image, labels and plate mask cropped; the scored plate and the
-    vehicles that reach into the window, in window pixels. The plate keeps its visibility in the frame."""
+    """The window as a scene record: image, labels and plate mask cropped; the scored plate and its
+    vehicle, in window pixels, are its ground truth (the plate keeps its visibility in the frame).
+
+    Other vehicles stay in the image but not in the ground truth: their plates are scored in their
+    own windows, and an oracle reader need not spend time on them."""
     x0, y0, x1, y1 = window.box_xyxy
     plate = frame.plates[window.plate]
-    vehicles, new_index = [], -1
-    for i, v in enumerate(frame.vehicles):
-        box = _shift_clip(v.box_xyxy, window.box_xyxy)
-        if box is None:
-            continue
-        new_index = len(vehicles) if i == plate.vehicle_index else new_index
-        vehicles.append(Vehicle(v.train_id, box))
-    plate_box = _shift_clip(plate.box_xyxy, window.box_xyxy)
-    if plate_box is None or new_index < 0:
+    vehicle = frame.vehicles[plate.vehicle_index]
+    plate_box, vehicle_box = (_shift_clip(b, window.box_xyxy) for b in (plate.box_xyxy, vehicle.box_xyxy))
+    if plate_box is None or vehicle_box is None:
         raise ValueError(f"window {window.box_xyxy} of {frame.name} misses its plate {plate.box_xyxy}")
     mask = None
     if frame.plate_mask is not None:
         # Only the scored plate is ground truth in the window: id 1.
         mask = (frame.plate_mask[y0:y1, x0:x1] == window.plate + 1).astype(frame.plate_mask.dtype)
     return Scene(frame.image[y0:y1, x0:x1], frame.labels[y0:y1, x0:x1],
-                 [replace(plate, box_xyxy=plate_box, vehicle_index=new_index)], vehicles, frame.seed,
+                 [replace(plate, box_xyxy=plate_box, vehicle_index=0)], [Vehicle(vehicle.train_id, vehicle_box)],
+                 frame.seed,
                  f"{frame.name}@x{x0}y{y0}p{window.plate}", mask)
 
 
