@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import TypeVar
 
@@ -86,6 +86,32 @@ def restore_all(attacker: attacks.Restorer, sensor: torch.Tensor, batch_size: in
     return torch.cat(outs)
 
 
+def shape_batches(images: torch.Tensor | Sequence[torch.Tensor], size: int) -> Iterator[tuple[int, torch.Tensor]]:
+    """(index of the first image, batch (B,3,H,W)) over `images`: a tensor (N,3,H,W) in slices of
+    `size`, or a sequence of (3,h,w) tensors in runs of consecutive equal shapes, at most `size` each."""
+    if isinstance(images, torch.Tensor):
+        for start in range(0, images.shape[0], size):
+            yield start, images[start:start + size]
+        return
+    start = 0
+    while start < len(images):
+        end = start + 1
+        while end < len(images) and end - start < size and images[end].shape == images[start].shape:
+            end += 1
+        yield start, torch.stack(list(images[start:end]))
+        start = end
+
+
+def restore_windows(attacker: attacks.Restorer, windows: Sequence[torch.Tensor], batch_size: int, device: str
+                    ) -> list[torch.Tensor]:
+    """The attacker's restorations (3,h,w) of sensor windows of several sizes, checked, on the CPU."""
+    outs: list[torch.Tensor] = []
+    with torch.no_grad():
+        for _, b in shape_batches(windows, batch_size):
+            outs.extend(check_restored(attacker.name, attacker.restore(b.to(device)), b.to(device)).cpu())
+    return outs
+
+
 def restoration_metrics(restored: torch.Tensor, sharp: torch.Tensor) -> tuple[dict[str, float], dict[str, list[float]]]:
     """Mean PSNR (dB) and SSIM of restored vs sharp (N,3,H,W), n_images; and the per-image values.
 
@@ -99,31 +125,46 @@ def restoration_metrics(restored: torch.Tensor, sharp: torch.Tensor) -> tuple[di
     return metrics, per_image
 
 
-def read_plates(reader: attacks.Reader, images: torch.Tensor, scenes: list[Scene], batch_size: int,
-                device: str, segment: Callable[[torch.Tensor], torch.Tensor] | None = None
+def read_plates(reader: attacks.Reader, images: torch.Tensor | Sequence[torch.Tensor], scenes: list[Scene],
+                batch_size: int, device: str, segment: Callable[[torch.Tensor], torch.Tensor] | None = None
                 ) -> tuple[list[PlateOutcome], dict[str, float], list[list[attacks.PlateRead]]]:
-    """Run a reader over images (N,3,H,W) batch-wise and score it against the scenes' plates.
+    """Run a reader over images (N,3,H,W), or plate windows (3,h,w) of several sizes, batch-wise and
+    score it against the scenes' plates (one scene record per image).
 
     Returns the per-plate outcomes, the timing (``images_per_s``, and ``<stage>_s_per_image`` for
-    readers that keep ``stage_seconds``, like lpdr) and the reads per image.
+    readers that keep ``stage_seconds``, like lpdr), n_images and the reads per image.
     """
     outcomes: list[PlateOutcome] = []
     all_reads: list[list[attacks.PlateRead]] = []
     stages_before = dict(getattr(reader, "stage_seconds", {}))
     t0 = time.perf_counter()
-    for start in range(0, images.shape[0], batch_size):
-        chunk = scenes[start:start + batch_size]
+    for start, batch in shape_batches(images, batch_size):
+        chunk = scenes[start:start + batch.shape[0]]
         hints = attacks.ReadHints(vehicle_boxes=[[v.box_xyxy for v in s.vehicles] for s in chunk], segment=segment)
         with torch.no_grad():
-            reads = check_reads(reader.name, reader.read(images[start:start + batch_size].to(device), hints),
-                                len(chunk))
+            reads = check_reads(reader.name, reader.read(batch.to(device), hints), len(chunk))
         for r, scene in zip(reads, chunk):
             outcomes.extend(score_scene(r, scene))
         all_reads.extend(reads)
-    timing = {"images_per_s": images.shape[0] / (time.perf_counter() - t0)}
+    n_images = len(images)
+    timing = {"images_per_s": n_images / (time.perf_counter() - t0), "n_images": float(n_images)}
     for stage, seconds in getattr(reader, "stage_seconds", {}).items():
-        timing[f"{stage}_s_per_image"] = (seconds - stages_before.get(stage, 0.0)) / images.shape[0]
+        timing[f"{stage}_s_per_image"] = (seconds - stages_before.get(stage, 0.0)) / n_images
     return outcomes, timing, all_reads
+
+
+@dataclass
+class PlateSet:
+    """The plate images of one lens and seed: one window per scored plate (benchmark.scenes.windows).
+
+    ``scenes`` are the windows as scene records (each holds its one scored plate, in window
+    pixels), ``sharp`` and ``sensor`` their images (3,h,w) in [0,1]; ``n_frames`` the frames
+    they were cut from."""
+
+    scenes: list[Scene]
+    sharp: list[torch.Tensor]
+    sensor: list[torch.Tensor]
+    n_frames: int
 
 
 @dataclass
@@ -137,6 +178,7 @@ class Target:
     ctx: attacks.FitContext
     segment_sensor: Callable[[torch.Tensor], torch.Tensor] | None   # lens's own net on sensor images
     segment_restored: Callable[[torch.Tensor], torch.Tensor] | None  # clean net on restored images
+    plates: PlateSet | None = None      # where plates are read; None: on the scenes themselves
 
 
 @dataclass
@@ -149,6 +191,7 @@ class Attacked:
     reads: dict[str, list[list[attacks.PlateRead]]] = field(default_factory=dict)
     described: dict[str, dict] = field(default_factory=dict)  # restorer name -> describe()
     references: set[str] = field(default_factory=set)          # restorers marked `reference`
+    restored_plates: dict[str, list[torch.Tensor]] = field(default_factory=dict)  # restorer -> plate windows
 
 
 def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dict[str, dict], cfg: RunConfig,
@@ -177,11 +220,21 @@ def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dic
             out.rows.append(rows.failed(kind, attacker.name, restored, restorer=attacker.name, settings=settings))
             continue
         run_s = time.perf_counter() - t0
-        out.restored[attacker.name] = restored
+        if target.plates is not None:
+            windows = attempt(attacker.name, "restore", lambda: restore_windows(
+                attacker, target.plates.sensor, cfg.profile.batch_size, cfg.device))  # type: ignore[union-attr]
+            if isinstance(windows, RowError):
+                out.rows.append(rows.failed(kind, attacker.name, windows, restorer=attacker.name, settings=settings))
+                continue
+            out.restored_plates[attacker.name] = windows
+        # Readers use the windows then; of the scenes only the sample picture's first one is kept
+        # (every restorer's 64 full scenes would hold gigabytes).
+        out.restored[attacker.name] = restored if target.plates is None else restored[:1]
         out.described[attacker.name] = attacker.describe()
         if kind == "reference":
             out.references.add(attacker.name)
         metrics, per_image = restoration_metrics(restored, target.sharp)
+        del restored
         metrics.update({"fit_s": float(fit_s), "images_per_s": target.sharp.shape[0] / run_s})
         row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
                        threat_model=attacker.threat_model.value, settings={"restorer": attacker.describe()})
@@ -191,8 +244,9 @@ def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dic
 
 def run_reader(target: Target, reader: attacks.Reader, cfg: RunConfig, rows: RowBuilder, out: Attacked) -> None:
     """Read with `reader` on the sensor images and on every restored set; score each chain."""
-    sources = {reader.name: (None, target.sensor),
-               **{chain_name(name, reader.name): (name, images) for name, images in out.restored.items()}}
+    plate_scenes, sensor, restored = plate_images(target, out)
+    sources = {reader.name: (None, sensor),
+               **{chain_name(name, reader.name): (name, images) for name, images in restored.items()}}
     fit_error = attempt(reader.name, "fit", lambda: reader.fit(target.ctx), cfg.budget_s)
     for chain, (restorer, images) in tqdm(sources.items(), desc=f"{target.lens_name} {reader.name}", leave=False):
         kind = "reader" if restorer is None else "reference" if restorer in out.references else "chain"
@@ -204,16 +258,27 @@ def run_reader(target: Target, reader: attacks.Reader, cfg: RunConfig, rows: Row
         # The attacker with device access segments sensor images with the lens's own network,
         # restored images with the clean one.
         segment = target.segment_sensor if restorer is None else target.segment_restored
-        result = attempt(reader.name, "read", lambda: read_plates(reader, images, target.scenes,
+        result = attempt(reader.name, "read", lambda: read_plates(reader, images, plate_scenes,
                                                                    cfg.profile.batch_size, cfg.device, segment),
                          cfg.budget_s)
         if isinstance(result, RowError):
             out.rows.append(rows.failed(kind, chain, result, restorer=restorer, reader=reader.name, settings=settings))
             continue
         outcomes, timing, out.reads[chain] = result
+        if target.plates is not None:
+            timing["n_frames"] = float(target.plates.n_frames)
         row = rows.row(kind, {**summarise(outcomes), **timing}, attack=chain, restorer=restorer, reader=reader.name,
                        threat_model=reader.threat_model.value, settings=settings)
         plate_intervals(row, outcomes)
         out.rows.append(row)
         out.plates.extend({"lens": target.lens_name, "attack": chain, "seed": row.seed, **o.__dict__}
                           for o in outcomes)
+
+
+def plate_images(target: Target, out: Attacked
+                 ) -> tuple[list[Scene], torch.Tensor | list[torch.Tensor], dict[str, torch.Tensor] | dict[str, list[torch.Tensor]]]:
+    """Where plates are read: (scene records, sensor images, restorer -> restored images), from the
+    plate windows when the target has them, else from the scenes themselves."""
+    if target.plates is None:
+        return target.scenes, target.sensor, out.restored
+    return target.plates.scenes, target.plates.sensor, out.restored_plates

@@ -40,6 +40,9 @@ class Profile:
     nafnet_enc_blocks: tuple[int, ...]
     nafnet_middle_blocks: int
     nafnet_dec_blocks: tuple[int, ...]
+    # Plate set (benchmark.scenes.windows): with a target, plates are read on windows around their
+    # vehicles, cut from val frames drawn in order until that many readable plates are found.
+    min_readable_plates: int = 0  # per seed; 0: read plates on the n_val scenes themselves
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -55,15 +58,15 @@ PROFILES: dict[str, Profile] = {
                 pretrain_eval_every=4,
                 optics_lr=2e-2, seg_lr=6e-4, deb_lr=1e-3, bound_scenes=30,
                 restorer_steps=40, nafnet_width=8, nafnet_enc_blocks=(1, 1), nafnet_middle_blocks=1,
-                nafnet_dec_blocks=(1, 1)),
+                nafnet_dec_blocks=(1, 1), min_readable_plates=2),
         Profile("quick", "the CPU default: a co-designed lens in under 10 minutes on 2 cores",
-                image_size=(512, 1024), n_val=8, n_train=64, train_crop=(128, 128), batch_size=8,
+                image_size=(512, 1024), n_val=64, n_train=64, train_crop=(128, 128), batch_size=8,
                 utility_model="b0", adversary_width=32, pretrain_steps=1800, codesign_steps=200,
                 pretrain_scenes=256, pretrain_crop=(128, 128), pretrain_batch=8, pretrain_lr=1e-3,
                 pretrain_warmup=90, pretrain_eval_every=180,
                 optics_lr=2e-2, seg_lr=6e-4, deb_lr=1e-3, bound_scenes=300,
                 restorer_steps=400, nafnet_width=16, nafnet_enc_blocks=(1, 1, 2), nafnet_middle_blocks=2,
-                nafnet_dec_blocks=(1, 1, 1)),
+                nafnet_dec_blocks=(1, 1, 1), min_readable_plates=200),
         Profile("paper", "the paper's settings, for a GPU: full-size scenes, 512x512 crops, batch 16, 200 epochs",
                 image_size=(1024, 2048), n_val=500, n_train=2975, train_crop=(512, 512), batch_size=16,
                 utility_model="b0", adversary_width=64, pretrain_steps=40000, codesign_steps=200 * 186,

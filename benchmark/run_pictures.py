@@ -34,12 +34,27 @@ def sample_grid(target: Target, lens: lenses.Lens, out: Attacked, folder: Path) 
 
 
 def plate_gallery(target: Target, out: Attacked, reader: str, folder: Path) -> str | None:
-    """The reader's plate gallery over sensor and restored images; its file name (None: nothing to show)."""
-    if reader not in out.reads or not any(readable(pl) for s in target.scenes for pl in s.plates):
+    """The reader's plate gallery over sensor and restored images; its file name (None: nothing to show).
+
+    With plate windows, the gallery shows the most common window size (its images must stack)."""
+    if reader not in out.reads:
         return None
     chains = {name: chain_name(name, reader) for name in out.restored if chain_name(name, reader) in out.reads}
-    images = {"sharp": target.sharp, "sensor": target.sensor, **{n: out.restored[n] for n in chains}}
-    reads = {"sensor": out.reads[reader], **{n: out.reads[c] for n, c in chains.items()}}
+    if target.plates is None:
+        scenes, pick = target.scenes, list(range(len(target.scenes)))
+        images = {"sharp": target.sharp, "sensor": target.sensor, **{n: out.restored[n] for n in chains}}
+    else:
+        p = target.plates
+        shapes = [tuple(t.shape) for t in p.sharp]
+        pick = [i for i, s in enumerate(shapes) if s == max(set(shapes), key=shapes.count)] if shapes else []
+        scenes = [p.scenes[i] for i in pick]
+        images = {name: torch.stack([windows[i] for i in pick]) if pick else torch.empty(0)
+                  for name, windows in {"sharp": p.sharp, "sensor": p.sensor,
+                                        **{n: out.restored_plates[n] for n in chains}}.items()}
+    if not any(readable(pl) for s in scenes for pl in s.plates):
+        return None
+    reads = {"sensor": [out.reads[reader][i] for i in pick],
+             **{n: [out.reads[c][i] for i in pick] for n, c in chains.items()}}
     name = f"plates_{target.lens_name}_{reader}_seed{target.ctx.seed}.png".replace("/", "_")
-    write_plate_gallery(images, target.scenes, reads, folder / name)
+    write_plate_gallery(images, scenes, reads, folder / name)
     return name

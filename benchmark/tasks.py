@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 import attacks
@@ -28,24 +29,29 @@ from benchmark import task_costs
 from benchmark.attacker_objects import load as load_attacker
 from benchmark.budget import BudgetExceeded, time_budget
 from benchmark.cache import CHECKSUM_SUFFIX, ArtifactCache, discard, exclusive, read_verified, write_verified
-from benchmark.evaluation import Attacked, Target, attempt, run_reader, run_restorers
+from benchmark.evaluation import Attacked, PlateSet, Target, attempt, run_reader, run_restorers
 from benchmark.intervals import utility_intervals
 from benchmark.planning import AttackerRef, Task, fit_task
+from benchmark.plate_scoring import readable
 from benchmark.plate_spectrum import cached_plate_spectrum
 from benchmark.provenance import provenance
 from benchmark.rows import RowBuilder
 from benchmark.run_pictures import plate_gallery, sample_grid
 from benchmark.run_config import RunConfig, training_scenes
-from benchmark.scenes import Scene, load_scenes, plate_entropy_bits
+from benchmark.scenes import Scene, load_scene, load_scenes, plate_entropy_bits
+from benchmark.scenes.windows import plate_windows, window_scene
 from benchmark.schema import Row, RowError
-from benchmark.sensing import sense, to_tensor, train_pairs_factory
+from benchmark.sensing import sense, sense_windows, to_tensor, train_pairs_factory
 from benchmark.utility.measure import has_labels, segmenter, utility_net_for, utility_scores
+from benchmark.utility.scoring import window_for
 from lenses.bound import bound_curve, bound_row
 from benchmark.utility.clean import clean_utility_net
 
 log = logging.getLogger(__name__)
 
 BOUND_CURVE_WIDTHS_PX = (4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192)
+# The plate set stops drawing frames here even short of its target (a scene set with few plates).
+MAX_PLATE_FRAMES = 2000
 RESULT_FILE = "result.json"
 
 
@@ -147,6 +153,38 @@ def _scenes(cfg: RunConfig, seed: int) -> list[Scene]:
     return load_scenes(cfg.scenes, "val", cfg.profile.n_val, cfg.profile.image_size, seed)
 
 
+def plate_set(cfg: RunConfig, seed: int, lens: lenses.Lens | None) -> PlateSet | None:
+    """The plate windows of `seed` (benchmark.scenes.windows) seen through `lens` (None: the sharp
+    windows); None when the profile reads plates on the n_val scenes themselves.
+
+    Val frames are drawn in order, one at a time (only the windows are kept), until the profile's
+    `min_readable_plates` are found; each window is at least the utility net's sliding window.
+    """
+    target = cfg.profile.min_readable_plates
+    if target <= 0:
+        return None
+    min_size = window_for(cfg.profile.image_size, cfg.profile.train_crop)[0]
+    scenes: list[Scene] = []
+    sharp: list[torch.Tensor] = []
+    sensor: list[torch.Tensor] = []
+    n_frames = 0
+    while len(scenes) < target and n_frames < MAX_PLATE_FRAMES:
+        frame = load_scene(cfg.scenes, "val", n_frames, cfg.profile.image_size, seed)
+        n_frames += 1
+        windows = plate_windows([frame], readable, min_size)
+        if not windows:
+            continue
+        scenes += [window_scene(frame, w) for w in windows]
+        sharp += [torch.from_numpy(np.ascontiguousarray(s.image)).permute(2, 0, 1) for s in scenes[-len(windows):]]
+        sensor += sharp[-len(windows):] if lens is None else sense_windows(lens, [frame], windows, seed, cfg.device)
+    if len(scenes) < target:
+        log.warning("plate set of seed %d: %d readable plates in %d frames, short of %d", seed, len(scenes), n_frames,
+                    target)
+    # Equal window sizes next to each other, so that restorers and readers batch them.
+    order = sorted(range(len(scenes)), key=lambda i: (tuple(sharp[i].shape), i))
+    return PlateSet([scenes[i] for i in order], [sharp[i] for i in order], [sensor[i] for i in order], n_frames)
+
+
 def _clean_net(cfg: RunConfig, seed: int, scenes: list[Scene]) -> torch.nn.Module | None:
     if not has_labels(scenes):
         return None
@@ -216,7 +254,8 @@ def _sharp(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
         utility_intervals(row, confusion)
         rows.append(row)
     segment = segmenter(clean, cfg) if clean is not None else None
-    target = Target("sharp", scenes, sharp, sharp, fit_context(None, cfg, task.seed, segment), segment, segment)
+    target = Target("sharp", scenes, sharp, sharp, fit_context(None, cfg, task.seed, segment), segment, segment,
+                    plates=plate_set(cfg, task.seed, None))
     readers, failed = _load_attackers(task.readers, attacks.Reader, builder)
     out = Attacked(rows=rows + failed)
     for reader in readers:
@@ -302,7 +341,7 @@ def _evaluate(task: Task, cfg: RunConfig, staging: Path) -> TaskResult:
     segment_sensor = segmenter(lens_net, cfg) if lens_net is not None else None
     target = Target(task.lens, scenes, sharp, sense(lens, sharp, cfg.profile.batch_size, task.seed, cfg.device),
                     fit_context(lens, cfg, task.seed, segment_sensor), segment_sensor,
-                    segmenter(clean, cfg) if clean is not None else None)
+                    segmenter(clean, cfg) if clean is not None else None, plate_set(cfg, task.seed, lens))
     builder = _builder(cfg, task.lens, task.seed, lens)
     restorers, failed_restorers = _load_attackers(task.restorers, attacks.Restorer, builder)
     readers, failed_readers = _load_attackers(task.readers, attacks.Reader, builder)

@@ -95,20 +95,27 @@ class Sensor(torch.nn.Module):
         """Expected sensor value per unit irradiance, per channel (3,): the tint a camera shows."""
         return self.electrons_per_unit() / self.spec.full_well_e
 
-    def raw_electrons(self, irradiance: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
+    def raw_electrons(self, irradiance: torch.Tensor, generator: torch.Generator | None = None,
+                      eps: torch.Tensor | None = None) -> torch.Tensor:
         """Noisy, clipped electron counts of the RGGB raw image (B,1,H,W).
 
         Shot (Poisson, variance = mean) and read (Gaussian) noise are drawn as one reparameterised
         Gaussian mean + sqrt(mean + read^2) * eps: the same first two moments, differentiable in the
-        mean and finite where the mean is 0.
+        mean and finite where the mean is 0. `eps` (B,1,H,W) standard normal draws replace the
+        draw from `generator` for a caller that ties the noise to pixel positions (so that a window
+        of a frame sees the frame's own noise).
         """
         # Mosaic first, then clip: the same values (the scale is positive) on one plane instead of three.
         mean = mosaic(irradiance, self.electrons_per_unit().to(irradiance)).clamp(min=0.0)
-        eps = torch.randn(mean.shape, generator=generator, device=mean.device, dtype=mean.dtype)
+        if eps is None:
+            eps = torch.randn(mean.shape, generator=generator, device=mean.device, dtype=mean.dtype)
+        elif eps.shape != mean.shape:
+            raise ValueError(f"eps must have the raw image's shape {tuple(mean.shape)}, got {tuple(eps.shape)}")
         noisy = mean + torch.sqrt(mean + self.spec.read_noise_e**2) * eps
         return noisy.clamp(0.0, self.spec.full_well_e)
 
-    def forward(self, irradiance: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
-        electrons = self.raw_electrons(irradiance, generator)
+    def forward(self, irradiance: torch.Tensor, generator: torch.Generator | None = None,
+                eps: torch.Tensor | None = None) -> torch.Tensor:
+        electrons = self.raw_electrons(irradiance, generator, eps)
         digital = quantize_ste(electrons * (self.levels / self.spec.full_well_e))
         return demosaic_bilinear(digital / self.levels)
