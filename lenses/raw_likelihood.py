@@ -23,29 +23,36 @@ import math
 
 import numpy as np
 import torch
+from scipy.fft import next_fast_len
 
-from lenses.sensor import mosaic
+from lenses.sensor import bayer_masks
 
 
 def raw_mean_electrons(patch: torch.Tensor, surround_radiance: float, psf: torch.Tensor,
-                       electrons_per_unit: torch.Tensor) -> torch.Tensor:
+                       electrons_per_unit: torch.Tensor, bayer_phase: tuple[int, int] = (0, 0)) -> torch.Tensor:
     """Mean raw electrons (N, h + 2r, w + 2r) of patches (N, 3, h, w) on a uniform surround, r = K // 2.
 
     The patch (scene radiance, linear, in [0, 1]) lies on an infinite surround of radiance
     `surround_radiance`; the result covers the patch and the r pixels around it that its light reaches
     through the (3, K, K) PSF (each channel summing to 1), beyond which only the surround is seen.
     Exact linear convolution through a zero-padded FFT (no wrap: the transform holds h + 2r rows).
-    Its top-left pixel is R of the RGGB pattern. float64.
+    `bayer_phase` = (row, column) parity of the result's top-left pixel in the sensor's RGGB pattern
+    ((0, 0): an R pixel). float64.
     """
     if patch.ndim != 4 or patch.shape[1] != 3:
         raise ValueError(f"patch must be (N, 3, h, w) radiance, got shape {tuple(patch.shape)}")
     k = psf.shape[-1]
     h, w = patch.shape[-2] + k - 1, patch.shape[-1] + k - 1
-    spectrum = torch.fft.rfft2(patch.to(torch.float64) - surround_radiance, s=(h, w))
-    irradiance = torch.fft.irfft2(spectrum * torch.fft.rfft2(psf.to(torch.float64), s=(h, w)), s=(h, w))
+    # Transform sizes with small prime factors only (an awkward size costs several times more);
+    # the extra rows and columns hold zeros of the linear convolution and are cut.
+    fast = (next_fast_len(h, real=True), next_fast_len(w, real=True))
+    spectrum = torch.fft.rfft2(patch.to(torch.float64) - surround_radiance, s=fast)
+    irradiance = torch.fft.irfft2(spectrum * torch.fft.rfft2(psf.to(torch.float64), s=fast), s=fast)[..., :h, :w]
     irradiance = irradiance + surround_radiance * psf.to(torch.float64).sum((-2, -1))[:, None, None]
     electrons = irradiance.clamp(min=0.0) * electrons_per_unit.to(torch.float64)[:, None, None]
-    return mosaic(electrons)[:, 0]
+    oy, ox = bayer_phase[0] % 2, bayer_phase[1] % 2
+    masks = bayer_masks(h + 1, w + 1, dtype=torch.float64)[:, oy:oy + h, ox:ox + w]
+    return (electrons * masks).sum(1)
 
 
 def draw_statistics(mean_e: torch.Tensor, read_noise_e: float, frames: int,

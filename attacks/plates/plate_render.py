@@ -60,7 +60,8 @@ def _check_format(fmt: str) -> None:
 
 
 @lru_cache(maxsize=64)
-def _font(size_px: int) -> ImageFont.FreeTypeFont:
+def plate_font(size_px: int) -> ImageFont.FreeTypeFont:
+    """The plates' font (DejaVu Sans Bold) at `size_px` pixels."""
     return ImageFont.truetype(str(_FONT_PATH), size_px)
 
 
@@ -88,11 +89,11 @@ def render_plate(
         band_w = render_w // 12
         draw.rectangle((border, border, border + band_w, render_h - 1 - border), fill=(0, 51, 153))
         left += band_w
-    font = _font(round(render_h * 0.78))
+    font = plate_font(round(render_h * 0.78))
     x1, y1, x2, y2 = draw.textbbox((0, 0), text, font=font)
     scale = min(1.0, (render_w - left - 3 * border) / (x2 - x1))
     if scale < 1.0:
-        font = _font(max(1, int(round(render_h * 0.78 * scale))))
+        font = plate_font(max(1, int(round(render_h * 0.78 * scale))))
         x1, y1, x2, y2 = draw.textbbox((0, 0), text, font=font)
     cx = (left + render_w - border) / 2
     draw.text((cx - (x1 + x2) / 2, render_h / 2 - (y1 + y2) / 2), text, fill=(15, 15, 15), font=font)
