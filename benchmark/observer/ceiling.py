@@ -18,11 +18,16 @@ Extra knowledge never hurts an optimal observer, so c_i bounds the probability t
 rather than the 0/1 correctness of the ML decision: the same mean (it is its conditional
 expectation given y), a smaller variance.
 
-Whole-plate ceiling. Reading the plate exactly implies reading character i, for every i, so
-P(exact) <= min_i P(char i correct) <= min_i c_i: the minimum over positions is proven and is what
-`plate_ceiling` reports. The product prod_i c_i is NOT an upper bound in general: the events
-"character i correct" of one attacker are not independent (a sharp frame makes all of them likely
-together), and P(A and B) can exceed P(A) P(B); no tighter combination is claimed.
+Whole-plate ceiling. Reading the plate exactly implies reading any block S of positions correctly,
+so P(exact) <= P(block S correct) <= c_S, the accuracy of the optimal joint decision on S with a
+genie revealing the other characters (the same argument as for one character). Hence
+P(exact) <= min over blocks S of c_S, proven for any set of blocks; `plate_ceiling` is the least of
+the seven single-character c_i and of the pair c_{01} (the first two letters, 676 hypotheses; it
+is also <= c_0 and c_1, since a right pair has both right). The pair matters where the characters
+are near chance: a single letter cannot be certified below 1/26 = 3.8 % nor a digit below 10 %,
+a pair of letters down to 1/676. The product prod_i c_i is NOT an upper bound in general: the
+events "character i correct" of one attacker are not independent (a sharp frame makes all of them
+likely together), and P(A and B) can exceed P(A) P(B); it is not used.
 
 Monte Carlo. Plates are drawn uniformly from the format; for each plate, each position and each
 hypothesis a as the truth, `noise_draws` observations. The per-plate averages are i.i.d. with mean
@@ -39,6 +44,7 @@ plate, no EU band, the highest exposure): more light at the same contrast raises
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -96,7 +102,8 @@ class CeilingCurve:
 
     char_ceiling (n,): mean over positions of c_i, the genie-aided per-character accuracy;
     position_ceiling (n, L) and position_interval (n, L, 2): c_i and its 95 % interval;
-    plate_ceiling (n,) = min_i c_i, the proven bound on P(exact plate read), plate_interval (n, 2);
+    plate_ceiling (n,) = min(min_i c_i, c_pair), the proven bound on P(exact plate read), plate_interval (n, 2);
+    pair_ceiling (n,), pair_interval (n, 2): c_pair of `pair_positions` read jointly (NaN where not computed);
     n_plates (n,): plate draws used; converged (n,): every interval narrower than interval_width;
     object_distance_m (n,) when each width used the PSF at its own distance, else None.
     """
@@ -117,6 +124,9 @@ class CeilingCurve:
     seconds: float
     object_distance_m: np.ndarray | None = None
     model: PlateModel = field(default_factory=PlateModel)
+    pair_positions: tuple[int, int] | None = None
+    pair_ceiling: np.ndarray | None = None
+    pair_interval: np.ndarray | None = None
 
     def to_dict(self) -> dict:
         """JSON-ready dict (lists of floats)."""
@@ -124,7 +134,7 @@ class CeilingCurve:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if isinstance(value, np.ndarray):
-                value = value.tolist()
+                value = np.where(np.isnan(value), None, value).tolist() if value.dtype.kind == "f" else value.tolist()
             elif isinstance(value, PlateModel):
                 value = dataclasses.asdict(value)
             out[f.name] = value
@@ -162,19 +172,36 @@ def ideal_accuracy(means_e: torch.Tensor, read_noise_e: float, frames: int, nois
     return float(posterior.max(-1).values.mean()), float(hits.mean())
 
 
+def block_accuracy(camera: Camera, text: str, block: tuple[int, ...], width_px: int, frames: tuple[int, ...],
+                   model: PlateModel, noise_draws: int, rng: np.random.Generator) -> np.ndarray:
+    """(len(frames),) estimates of the genie-aided accuracy of reading the positions `block` of
+    plate `text` jointly (every other character revealed): one draw per frame count."""
+    alphabets = format_alphabets(model.fmt)
+    texts = []
+    for values in itertools.product(*(alphabets[i] for i in block)):
+        chars = list(text)
+        for i, v in zip(block, values):
+            chars[i] = v
+        texts.append("".join(chars))
+    means = hypothesis_means(camera, texts, width_px, model)
+    return np.array([ideal_accuracy(means, camera.read_noise_e, t, noise_draws, rng)[0] for t in frames])
+
+
 def position_accuracies(camera: Camera, width_px: int, frames: tuple[int, ...], model: PlateModel, n_plates: int,
-                        noise_draws: int, rng: np.random.Generator) -> np.ndarray:
-    """(n_plates, len(frames), L) per-plate estimates of c_i (E max posterior) at one width.
+                        noise_draws: int, rng: np.random.Generator,
+                        pair: tuple[int, int] | None = None) -> np.ndarray:
+    """(n_plates, len(frames), L [+ 1]) per-plate estimates of c_i (E max posterior) at one width,
+    and of the pair ceiling c_pair as a last column when `pair` is given.
 
     The frame counts share the plate draws and their rendered hypotheses (the costly part)."""
-    alphabets = format_alphabets(model.fmt)
-    out = np.empty((n_plates, len(frames), len(alphabets)))
+    blocks = [(i,) for i in range(len(model.fmt))] + ([tuple(pair)] if pair is not None else [])
+    out = np.empty((n_plates, len(frames), len(blocks)))
     for j in range(n_plates):
         text = random_plate_text(rng, model.fmt)
-        for i, alphabet in enumerate(alphabets):
-            means = hypothesis_means(camera, [text[:i] + a + text[i + 1:] for a in alphabet], width_px, model)
-            for n, t in enumerate(frames):
-                out[j, n, i] = ideal_accuracy(means, camera.read_noise_e, t, noise_draws, rng)[0]
+        for b, block in enumerate(blocks):
+            # One observation per hypothesis suffices for a pair: it has |A|^2 of them.
+            draws = noise_draws if len(block) == 1 else 1
+            out[j, :, b] = block_accuracy(camera, text, block, width_px, frames, model, draws, rng)
     return out
 
 
@@ -204,16 +231,16 @@ class Precision:
 
 
 def width_ceiling(camera: Camera, width_px: int, frames: tuple[int, ...], model: PlateModel,
-                  rng: np.random.Generator, noise_draws: int = 2,
-                  precision: Precision = Precision()) -> tuple[np.ndarray, bool]:
-    """Per-plate estimates (n_plates, len(frames), L) of every c_i at one width, and whether
-    `precision` was met (plate draws are added until it is, or up to its max_plates)."""
-    samples = position_accuracies(camera, width_px, frames, model, precision.min_plates, noise_draws, rng)
+                  rng: np.random.Generator, noise_draws: int = 2, precision: Precision = Precision(),
+                  pair: tuple[int, int] | None = None) -> tuple[np.ndarray, bool]:
+    """Per-plate estimates (n_plates, len(frames), L [+ 1]) of every c_i (and c_pair) at one width, and
+    whether `precision` was met (plate draws are added until it is, or up to its max_plates)."""
+    samples = position_accuracies(camera, width_px, frames, model, precision.min_plates, noise_draws, rng, pair)
     while True:
         done = precision.met(_interval(samples)[1])
         if done or samples.shape[0] >= precision.max_plates:
             return samples, done
-        more = position_accuracies(camera, width_px, frames, model, precision.batch, noise_draws, rng)
+        more = position_accuracies(camera, width_px, frames, model, precision.batch, noise_draws, rng, pair)
         samples = np.concatenate([samples, more])
 
 
@@ -226,8 +253,14 @@ def lens_at_distance(lens: torch.nn.Module, object_distance_m: float) -> torch.n
 
 def ceiling_curves(lens: torch.nn.Module, widths_px: tuple[int, ...] | list[int], frames: tuple[int, ...] = (1,),
                    model: PlateModel = PlateModel(), seed: int = 0, at_own_distance: bool = False,
-                   noise_draws: int = 2, precision: Precision = Precision()) -> list[CeilingCurve]:
+                   noise_draws: int = 2, precision: Precision = Precision(), pair: tuple[int, int] | None = (0, 1),
+                   pair_until: float = 0.10) -> list[CeilingCurve]:
     """One `CeilingCurve` per frame count, through `lens`, for each plate width in px (module docstring).
+
+    pair: two positions read jointly with the rest revealed (a tighter plate bound, see the module
+    docstring), computed from the smallest width up to the first width where its lower 95 % limit
+    exceeds `pair_until` for every frame count (beyond, the plate bound is the single-character
+    minimum, valid and looser; W_5% is decided below). None: singles only.
 
     at_own_distance: for each width, the PSF of an object plane at the distance where the format's
     plate (PLATE_SIZE_M wide) is that many pixels wide (`lenses.depth.plate_distance_m`); else the
@@ -242,23 +275,36 @@ def ceiling_curves(lens: torch.nn.Module, widths_px: tuple[int, ...] | list[int]
     rng = np.random.default_rng(seed)
     results, distances = [], []
     camera = Camera.of(lens)
+    n_pos = len(model.fmt)
+    active = pair
     for w in widths:
         if at_own_distance:
             distances.append(plate_distance_m(w, PLATE_SIZE_M[0], lens.spec))
             camera = Camera.of(lens_at_distance(lens, distances[-1]))
-        results.append(width_ceiling(camera, w, tuple(frames), model, rng, noise_draws, precision))
+        results.append(width_ceiling(camera, w, tuple(frames), model, rng, noise_draws, precision, active))
+        if active is not None and (_interval(results[-1][0][..., n_pos])[1][:, 0] > pair_until).all():
+            active = None
     seconds = time.perf_counter() - t0
     curves = []
     for n, t in enumerate(frames):
-        per_width = [samples[:, n] for samples, _ in results]
+        per_width = [samples[:, n, :n_pos] for samples, _ in results]
         position, position_interval = (np.stack(v) for v in zip(*(_interval(s) for s in per_width)))
         char, char_interval = (np.stack(v) for v in zip(*(_interval(s.mean(1)) for s in per_width)))
-        # min_i of each position's interval ends covers min_i c_i whenever every interval covers its c_i.
-        plate_interval = np.stack([position_interval[..., 0].min(1), position_interval[..., 1].min(1)], -1)
+        pair_ceiling, pair_interval = np.full(len(widths), np.nan), np.full((len(widths), 2), np.nan)
+        for k, (samples, _) in enumerate(results):
+            if samples.shape[-1] > n_pos:
+                pair_ceiling[k], pair_interval[k] = _interval(samples[:, n, n_pos])
+        # The plate bound is the least of the block ceilings; the least of their interval ends covers
+        # it whenever every interval covers its own ceiling.
+        with np.errstate(invalid="ignore"):
+            plate = np.fmin(position.min(1), pair_ceiling)
+            plate_interval = np.stack([np.fmin(position_interval[..., 0].min(1), pair_interval[:, 0]),
+                                       np.fmin(position_interval[..., 1].min(1), pair_interval[:, 1])], -1)
         curves.append(CeilingCurve(
             lens=lens.spec.name, frames=t, widths_px=np.asarray(widths), char_ceiling=char,
             char_interval=char_interval, position_ceiling=position, position_interval=position_interval,
-            plate_ceiling=position.min(1), plate_interval=plate_interval,
+            plate_ceiling=plate, plate_interval=plate_interval, pair_positions=pair,
+            pair_ceiling=pair_ceiling, pair_interval=pair_interval,
             n_plates=np.asarray([s.shape[0] for s in per_width]), converged=np.asarray([c for _, c in results]),
             noise_draws=noise_draws, interval_width=precision.interval_width, seconds=seconds,
             object_distance_m=np.asarray(distances) if at_own_distance else None, model=model))

@@ -55,7 +55,7 @@ def run_study(out_json: Path = REPO / "leaderboard" / "studies" / "ideal_observe
               out_png: Path = REPO / "leaderboard" / "charts" / "ideal_observer.png",
               names: tuple[str, ...] | None = None, widths_px: tuple[int, ...] = WIDTHS_PX,
               frames: tuple[int, ...] = FRAMES, depth_lenses: tuple[str, ...] = DEPTH_LENSES, seed: int = 0,
-              precision: Precision = Precision(max_plates=120)) -> dict:
+              precision: Precision = Precision(max_plates=40)) -> dict:
     """Compute the study (module docstring) for `names` (default: all quick lenses); write json + png."""
     lenses_by_name = quick_lenses()
     names = names or tuple(lenses_by_name)

@@ -62,7 +62,7 @@ def test_two_glyphs_in_white_gaussian_noise_match_phi_of_half_the_distance(frame
 
 @pytest.fixture(scope="module")
 def defocus_curves() -> list[CeilingCurve]:
-    coarse = Precision(interval_width=0.1, coarse_width=0.2, min_plates=4, batch=4, max_plates=8)
+    coarse = Precision(interval_width=0.1, coarse_width=0.2, min_plates=3, batch=3, max_plates=3)
     return ceiling_curves(lenses.load("defocus"), (6, 12), frames=(1, 8), precision=coarse, seed=0)
 
 
@@ -73,9 +73,13 @@ def test_more_frames_never_lower_the_ceiling(defocus_curves):
     assert (eight.plate_ceiling > one.plate_ceiling).all()
 
 
-def test_plate_ceiling_is_the_worst_position_and_certified_width_follows_it(defocus_curves):
+def test_plate_ceiling_is_the_least_block_and_certified_width_follows_it(defocus_curves):
     curve = defocus_curves[0]
-    np.testing.assert_array_equal(curve.plate_ceiling, curve.position_ceiling.min(1))
+    np.testing.assert_array_equal(curve.plate_ceiling, np.fmin(curve.position_ceiling.min(1), curve.pair_ceiling))
+    # A right pair has both its characters right: c_pair <= min(c_0, c_1) (up to Monte-Carlo error).
+    assert (curve.pair_ceiling <= curve.position_ceiling[:, :2].min(1) + 0.03).all()
+    # Near chance the pair certifies what no single letter can (1/26 = 3.8 %): defocus at 6 px.
+    assert curve.pair_ceiling[0] < 1 / 26
     assert (curve.plate_ceiling <= curve.char_ceiling).all()
     assert ((curve.plate_interval[:, 0] <= curve.plate_ceiling) & (curve.plate_ceiling <= curve.plate_interval[:, 1])).all()
     eps_between = float(curve.plate_ceiling.mean())

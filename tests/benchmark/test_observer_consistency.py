@@ -15,7 +15,7 @@ from benchmark.observer.consistency import BinAccuracy, ceiling_high_in_bin, che
 @pytest.fixture(scope="module")
 def defocus_curve():
     coarse = Precision(interval_width=0.1, coarse_width=0.2, min_plates=4, batch=4, max_plates=8)
-    return ceiling_curve(lenses.load("defocus"), (6, 12), frames=1, precision=coarse)
+    return ceiling_curve(lenses.load("defocus"), (6, 12), frames=1, precision=coarse, pair=None)
 
 
 def measured(reader: str, truths: list[str], reads: list[str], low: float, high: float) -> BinAccuracy:
