@@ -8,8 +8,8 @@ its own site) and scores a candidate string by its Gaussian log-likelihood: the 
 at the box's size, blurred with the PSF, converted to electrons, and fitted to the observed sites
 of each colour by a gain, a uniform surround and an offset (the plate's tint and exposure and the
 scene around the plate are unknown: the profile likelihood maximises over them; a surround that is
-not uniform is a model error this reader lives with); the noise variance per site is the shot + read + 10-bit rounding variance at the
-observed level.
+not uniform is a model error this reader lives with); the noise variance per site is the shot +
+read + 10-bit rounding variance at the observed level.
 
 Search. A dynamic programme over neighbouring characters is exact only when each glyph's position
 does not depend on the other characters. The plates are centred in a proportional font (and
@@ -90,8 +90,9 @@ class IdealObserverReader(Reader):
         self.plate_format = ctx.extras.get("plate_format", PLATE_FORMAT)
         format_alphabets(self.plate_format)  # validates it
         levels = 2**sensor.adc_bits - 1
-        self._camera = {"psf": psf, "electrons_per_unit": gain * sensor.full_well_e, "read_noise_e": sensor.read_noise_e,
-                        "electrons_per_level": sensor.full_well_e / levels, "levels": levels}
+        self._camera = {"psf": psf, "electrons_per_unit": gain * sensor.full_well_e,
+                        "read_noise_e": sensor.read_noise_e, "electrons_per_level": sensor.full_well_e / levels,
+                        "levels": levels}
 
     def describe(self) -> dict[str, Any]:
         return {**super().describe(), "beam": self.beam, "max_sweeps": self.max_sweeps,

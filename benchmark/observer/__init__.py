@@ -5,7 +5,9 @@
     check_consistency(readers, curve)                                # empirical readers above the ceiling
 """
 
-from benchmark.observer.ceiling import CeilingCurve, PlateModel, Precision, ceiling_curve, ceiling_curves, certified_width
+from benchmark.observer.ceiling import (CeilingCurve, PlateModel, Precision, ceiling_curve, ceiling_curves,
+                                        certified_width)
 from benchmark.observer.consistency import BinAccuracy, Violation, check_consistency
 
-__all__ = ["BinAccuracy", "CeilingCurve", "PlateModel", "Precision", "Violation", "ceiling_curve", "ceiling_curves", "certified_width", "check_consistency"]
+__all__ = ["BinAccuracy", "CeilingCurve", "PlateModel", "Precision", "Violation", "ceiling_curve", "ceiling_curves",
+           "certified_width", "check_consistency"]

@@ -54,6 +54,7 @@ import torch
 
 from attacks.plates.plate_render import PLATE_FORMAT, PLATE_SIZE_M, format_alphabets, random_plate_text, render_plate
 from lenses.depth import plate_distance_m
+from lenses.lens import Lens
 from lenses.raw_likelihood import draw_statistics, log_likelihoods, raw_mean_electrons
 
 Z95 = 1.959963984540054
@@ -246,7 +247,6 @@ def width_ceiling(camera: Camera, width_px: int, frames: tuple[int, ...], model:
 
 def lens_at_distance(lens: torch.nn.Module, object_distance_m: float) -> torch.nn.Module:
     """The same lens (current coefficients) imaging an object plane at `object_distance_m`."""
-    from lenses import Lens
     spec = lens.current_spec()
     return Lens(dataclasses.replace(spec, optics=dataclasses.replace(spec.optics, object_distance_m=object_distance_m)))
 

@@ -81,7 +81,8 @@ def test_plate_ceiling_is_the_least_block_and_certified_width_follows_it(defocus
     # Near chance the pair certifies what no single letter can (1/26 = 3.8 %): defocus at 6 px.
     assert curve.pair_ceiling[0] < 1 / 26
     assert (curve.plate_ceiling <= curve.char_ceiling).all()
-    assert ((curve.plate_interval[:, 0] <= curve.plate_ceiling) & (curve.plate_ceiling <= curve.plate_interval[:, 1])).all()
+    low, high = curve.plate_interval.T
+    assert ((low <= curve.plate_ceiling) & (curve.plate_ceiling <= high)).all()
     eps_between = float(curve.plate_ceiling.mean())
     assert certified_width(curve, eps=float(curve.plate_ceiling.max()) + 1e-9) == 12
     assert certified_width(curve, eps=float(curve.plate_ceiling.min()) - 1e-9) == 0
