@@ -83,7 +83,7 @@ def write_chart(record: dict, path: Path) -> Path:
     """Plate ceiling vs width per lens: T = 1 solid, T = 30 dashed, own-distance PSF dotted, 5 % line."""
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for ax, key, title in zip(axes, ("plate", "char"), ("whole plate (min over characters)", "per character (mean)")):
+    for ax, key, title in zip(axes, ("plate", "char"), ("whole plate (least block: characters, letter pair)", "per character (mean)")):
         for n, (name, entry) in enumerate(record["lenses"].items()):
             colour = colours[n % len(colours)]
             for frames, style in (("t1", "-"), ("t30", "--")):
