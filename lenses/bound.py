@@ -1,11 +1,20 @@
 """Attack-independent privacy bound: how many bits of a licence plate can any attacker get?
 
-The lens and sensor are linearised at an operating radiance L_c per channel c (the mean radiance of
-plate crops): y_c = g_c (h_c * x_c) + n_c, with g_c = lens.gain() the sensor value per unit radiance,
-h_c the pixel-sampled PSF and n_c white Gaussian noise of the sensor's shot + read variance at that
-level, (e_c L_c + read^2) / full_well^2 in sensor units (e_c = electrons per unit radiance). Dividing by
-g_c puts signal and noise in radiance units: the noise-to-signal ratio nsr_c = (e_c L_c + read^2) / e_c^2,
-divided by T for T frames of a static plate (their mean is a sufficient statistic).
+The lens and sensor are linearised: y_c = g_c (h_c * x_c) + n_c, with g_c = lens.gain() the sensor
+value per unit radiance, h_c the pixel-sampled PSF and n_c white Gaussian noise. Shot noise is
+signal-dependent (variance e_c L + read^2 electrons at radiance L), so the noise level is chosen
+where it is smallest: at the least radiance L_min,c the plate can show (`PlateSpectrum.min_radiance`,
+the minimum over the sharp plate crops per channel; 0, read noise alone, when it was not measured).
+Every pixel of the plate then has at least that noise, and replacing each pixel's noise by its
+least possible variance can only add information (a noisier Gaussian observation is the less noisy
+one plus independent noise), so B stays an upper bound. What this neglects, stated: the shot noise
+also carries information through its variance (it grows with the mean); per pixel that adds
+1 / (2 v) to the Fisher information 1 / v about the mean (v in electrons^2), a relative
+1 / (2 (e_c L_min + read^2)) <= 1 / (2 read^2) = 12.5 % at the darkest possible pixel and
+0.15 % on the plates' ink (L ~ 0.05). (The earlier operating level, the MEAN plate radiance, was
+not conservative: dark ink is up to ~3x less noisy in variance than the mean.) Dividing by g_c puts
+signal and noise in radiance units: nsr_c = (e_c L_min,c + read^2) / e_c^2, divided by T for T
+frames of a static plate (their mean is a sufficient statistic).
 
 Plate content x_c is modelled by its power spectrum (`PlateSpectrum`): at plate width w px the
 per-pixel density is S_w(f) = w^2 D(w f), where D is the density in cycles per plate width, so a
@@ -35,9 +44,11 @@ import torch
 ASSUMPTIONS = (
     "Upper bound on the bits B any attacker can extract about a plate, under these assumptions: "
     "(1) shift-invariant optics, PSF of the optical axis; "
-    "(2) sensor linearised at the operating radiance (mean radiance of training plate crops): additive "
-    "white Gaussian noise with the shot + read variance at that level, independent across pixels, "
-    "channels and frames (shot noise is signal-dependent, so darker plate regions are in truth less noisy); "
+    "(2) sensor linearised: additive white Gaussian noise, independent across pixels, channels and frames, "
+    "with the shot + read variance of the LEAST radiance the plate shows (per channel minimum over the sharp "
+    "training plate crops; read noise alone when not measured), so that no plate pixel is less noisy than "
+    "assumed; neglected: the information shot noise carries through its variance, a relative 1/(2 v) of the "
+    "Fisher information at variance v electrons^2 (0.15 % on the plates' ink); "
     "(3) plate content is at most as informative as a Gaussian field with the power spectrum estimated from "
     "sharp training plate crops (mean removed; spectrum scaled with plate width as S_w(f) = w^2 D(w f)); "
     "(4) R, G, B bounded separately and summed, an upper bound because the channels' noises are independent; "
@@ -60,8 +71,9 @@ class PlateSpectrum:
 
     table: (3, 2*ny+1, 2*nx+1) density D at nu_x = -nx..nx cycles per plate width and
     nu_y = (-ny..ny) * aspect cycles per plate width (rows follow the plate's height). Beyond the
-    table D follows the fitted tail amplitude * |nu|^-exponent. mean_radiance (3,) is the operating
-    level; aspect = plate width / height.
+    table D follows the fitted tail amplitude * |nu|^-exponent. mean_radiance (3,) is the mean
+    plate radiance; min_radiance (3,) the least (the bound's noise level; None: not measured, 0 is
+    used); aspect = plate width / height.
     """
 
     table: np.ndarray
@@ -70,6 +82,12 @@ class PlateSpectrum:
     tail_exponent: float
     mean_radiance: tuple[float, float, float]
     n_crops: int = 0
+    min_radiance: tuple[float, float, float] | None = None
+
+    def noise_radiance(self) -> tuple[float, float, float]:
+        """The least radiance per channel the plate shows (its noise is the least): `min_radiance`,
+        or 0 (read noise alone, always conservative) when it was not measured."""
+        return self.min_radiance if self.min_radiance is not None else (0.0, 0.0, 0.0)
 
     def density(self, nu_y: torch.Tensor, nu_x: torch.Tensor) -> torch.Tensor:
         """D at frequencies (cycles per plate width), shape (3, *nu_x.shape), float64."""
@@ -103,7 +121,7 @@ def plate_height_px(width_px: int, aspect: float) -> int:
 
 
 def noise_to_signal(lens: torch.nn.Module, radiance: tuple[float, ...] | torch.Tensor, frames: int = 1) -> torch.Tensor:
-    """Noise variance over squared gain at the operating radiance, (3,) float64, radiance^2 units.
+    """Noise variance over squared gain at radiance `radiance` (the bound uses the least plate radiance), (3,) float64, radiance^2 units.
 
     (e_c L_c + read^2) / (e_c^2 T): shot + read variance in electrons over the squared electrons per
     unit radiance, for T frames averaged. Equivalent to (mu_c + read^2) / full_well^2 / g_c^2 in
@@ -221,7 +239,7 @@ def certified_width(psf: torch.Tensor, spectrum: PlateSpectrum, nsr: torch.Tenso
 def bound_curve(lens: torch.nn.Module, spectrum: PlateSpectrum, widths_px: list[int] | np.ndarray,
                 entropy_bits: float, frames: int = 1) -> dict[str, np.ndarray]:
     """B and the Fano ceiling per plate width, for the chart: {"width_px", "bits", "ceiling"} arrays."""
-    nsr = noise_to_signal(lens, spectrum.mean_radiance, frames)
+    nsr = noise_to_signal(lens, spectrum.noise_radiance(), frames)
     with torch.no_grad():
         psf = lens.psf()
         bits = np.array([float(plate_bits(psf, spectrum, int(w), nsr)) for w in widths_px])
@@ -234,16 +252,18 @@ def bound_row(lens: torch.nn.Module, spectrum: PlateSpectrum, entropy_bits: floa
               frames: tuple[int, ...] = (1, 30)) -> dict[str, float | int | str]:
     """Flat metrics of the bound for one lens (the runner's `bound` row).
 
-    Keys: bound_entropy_bits, bound_eps, bound_radiance_{r,g,b} (operating level), and per T in
+    Keys: bound_entropy_bits, bound_eps, bound_radiance_{r,g,b} (mean plate radiance),
+    bound_noise_radiance_{r,g,b} (the least plate radiance, where the noise is set), and per T in
     `frames`: bound_bits_w{W}_t{T}, bound_ceiling_w{W}_t{T} for each width and bound_width_eps_t{T}
     (W_eps in px); bound_assumptions carries ASSUMPTIONS.
     """
     row: dict[str, float | int | str] = {"bound_entropy_bits": float(entropy_bits), "bound_eps": float(eps)}
     row.update({f"bound_radiance_{c}": float(v) for c, v in zip("rgb", spectrum.mean_radiance)})
+    row.update({f"bound_noise_radiance_{c}": float(v) for c, v in zip("rgb", spectrum.noise_radiance())})
     with torch.no_grad():
         psf = lens.psf()
         for t in frames:
-            nsr = noise_to_signal(lens, spectrum.mean_radiance, t)
+            nsr = noise_to_signal(lens, spectrum.noise_radiance(), t)
             for w in widths_px:
                 bits = float(plate_bits(psf, spectrum, w, nsr))
                 row[f"bound_bits_w{w}_t{t}"] = bits

@@ -185,3 +185,20 @@ def test_row_and_curve_report_every_width_and_frame_count():
     curve = bound_curve(cam, spectrum, [4, 8, 16], ENTROPY)
     np.testing.assert_allclose(curve["bits"][1:], [row["bound_bits_w8_t1"], row["bound_bits_w16_t1"]], rtol=1e-9)
     assert np.all(np.diff(curve["ceiling"]) >= 0)
+
+
+def test_noise_is_set_at_the_least_plate_radiance_never_the_mean():
+    """Shot noise falls with radiance: the bound's noise must be that of the darkest plate pixel."""
+    import dataclasses
+    cam = lens(3.0)
+    psf = cam.psf().detach()
+    measured = dataclasses.replace(smooth_spectrum(), min_radiance=(0.05, 0.05, 0.05))
+    row = bound_row(cam, measured, ENTROPY, widths_px=(16,), frames=(1,))
+    at_least = float(plate_bits(psf, measured, 16, noise_to_signal(cam, (0.05, 0.05, 0.05))))
+    at_mean = float(plate_bits(psf, measured, 16, noise_to_signal(cam, measured.mean_radiance)))
+    assert row["bound_bits_w16_t1"] == pytest.approx(at_least, rel=1e-9)
+    assert row["bound_noise_radiance_g"] == 0.05
+    assert at_least > at_mean
+    unmeasured = smooth_spectrum()
+    assert unmeasured.noise_radiance() == (0.0, 0.0, 0.0)
+    assert bound_curve(cam, unmeasured, [16], ENTROPY)["bits"][0] > at_least
