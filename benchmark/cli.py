@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime as _dt
 import json
 import logging
@@ -66,6 +67,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="plate strings the privacy bound counts: L = letter, D = digit (default: the scene generator's)")
     run.add_argument("--frames", type=int, default=30, metavar="T",
                      help="frames of a static plate for the video bound (default 30; T = 1 is always reported)")
+    run.add_argument("--profile-time", action="store_true",
+                     help="profile every computed task (cProfile, peak memory): profile.json and profile.md in --out")
     train = sub.add_parser("train", help="train (or load) a co-designed lens; under torchrun, data-parallel over the ranks")
     train.add_argument("--lens", required=True, choices=_codesign_lenses(), help="co-design scheme registered as a lens")
     train.add_argument("--profile", default="quick", choices=list(PROFILES), help="run size (default: quick)")
@@ -159,7 +162,7 @@ def prepare_out(path: Path | None) -> tuple[Path, bool]:
 
 def cmd_run(args: argparse.Namespace) -> int:
     import lenses
-    from benchmark import executors, runner
+    from benchmark import executors, profiling, runner
     from benchmark.profiles import get_profile
     from benchmark.provenance import git_commit
     from benchmark.run_config import RunConfig
@@ -188,7 +191,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"profile {profile.name}: {json.dumps(profile.to_dict())}")
     try:
         t0 = time.perf_counter()
-        result = runner.run(cfg, executor=args.executor, selection=selection)
+        with (profiling.profiled(out, profile.n_val, args.device, args.executor) if args.profile_time
+              else contextlib.nullcontext()):
+            result = runner.run(cfg, executor=args.executor, selection=selection)
     except BaseException:
         if created and not any(out.iterdir()):
             out.rmdir()

@@ -23,6 +23,7 @@ import torch
 
 import attacks
 import lenses
+from benchmark import profiling
 from benchmark.cache import ArtifactCache, discard, exclusive, read_verified, write_verified
 from benchmark.charts.plate_gallery import write_plate_gallery
 from benchmark.evaluation import Attacked, Target, attempt, run_reader, run_restorers
@@ -98,7 +99,8 @@ def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
         staging = directory / f".{task.key}.staging-{os.getpid()}-{time.monotonic_ns()}"
         staging.mkdir(parents=True)
         t0 = time.perf_counter()
-        result = _KINDS[task.kind](task, cfg, staging)
+        with profiling.task_scope(task):  # a no-op unless the run is profiled (--profile-time)
+            result = _KINDS[task.kind](task, cfg, staging)
         for row in result.rows:
             row.provenance["wall_s"] = time.perf_counter() - t0
         write_verified(staging / RESULT_FILE, json.dumps(result.to_json(), default=str, allow_nan=False).encode())
