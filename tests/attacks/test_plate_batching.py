@@ -1,5 +1,6 @@
-"""Batched plate reading (attacks/plates/ocr.py, attacks/lpdr.py) reads exactly what reading one crop at a
-time with EasyOCR's own ``recognize`` reads, and the lpdr reader segments each image once per segmenter."""
+"""Batched plate reading (attacks/plates/ocr.py, attacks/lpdr.py) reads exactly what the reader read before
+it batched (one image per pass, EasyOCR's own ``recognize`` one crop at a time: tests/plate_reference.py),
+and the lpdr reader segments each image once per segmenter."""
 
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ def _as_tuples(reads):
 
 @pytest.mark.parametrize("size,n", [((128, 256), 4), ((512, 1024), 3)], ids=["smoke", "quick"])
 def test_batched_reads_equal_reading_each_crop_alone(monkeypatch, size, n):
-    """Same strings, boxes and scores (bit for bit) as one image and one EasyOCR call per crop."""
+    """Same strings, boxes and scores (bit for bit) as one image per pass and one recognizer pass per crop."""
     images, hints = _scenes(size, n)
     reader = attacks.load("lpdr-oracle")
     reader.fit(attacks.FitContext())
@@ -49,7 +50,7 @@ def test_crops_of_several_widths_are_grouped_and_read_like_alone():
     reader = attacks.load("lpdr-oracle")
     reader.read(images, hints)
     crops = [c for c in _plate_crops(reader, images)]
-    crops.append(rng.integers(0, 255, (20, 90, 3), dtype=np.uint8))  # noise: a low-confidence second pass
+    crops.append(rng.integers(0, 255, (20, 90, 3), dtype=np.uint8))  # noise: read with low confidence
     crops.append(np.zeros((0, 4, 3), np.uint8))                       # empty: reads ""
     widths = {plate_ocr.padded_width(plate_ocr.prepare_crop(c)) for c in crops if c.size}
     assert len(widths) >= 2

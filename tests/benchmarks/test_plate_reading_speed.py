@@ -1,4 +1,5 @@
-"""Batched plate reading against reading one image and one crop at a time, as a ratio in one run.
+"""Batched plate reading against the reader before batching (one image per pass, one recognizer pass per
+crop: tests/plate_reference.py), as a ratio in one run.
 
 Run with `pytest tests/benchmarks/test_plate_reading_speed.py --benchmark-only`: the target (batched
 per-image time <= TARGET_RATIO x the one-at-a-time time, fastest of interleaved rounds) is asserted
@@ -36,7 +37,7 @@ def test_batched_plate_reading_vs_one_at_a_time(benchmark, request, monkeypatch)
         return reader.read(images, attacks.ReadHints(vehicle_boxes=boxes))
 
     def one_at_a_time():
-        # Today's reader before batching: one image per pass, one EasyOCR call per crop.
+        # The reader before batching: one image per pass, one recognizer pass per crop.
         monkeypatch.setattr(attacks.lpdr, "read_plates", recognize_one_at_a_time)
         return [reader.read(images[i:i + 1], attacks.ReadHints(vehicle_boxes=boxes[i:i + 1]))[0]
                 for i in range(len(scenes))]
