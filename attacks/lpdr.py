@@ -12,7 +12,9 @@ be attributed to the stage that made it, and ``reader.stage_seconds`` their cumu
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import time
+import weakref
 from typing import Any, ClassVar
 
 import numpy as np
@@ -93,6 +95,7 @@ class PlateReaderBase(Reader):
         self.last_trace: list[StageTrace] = []
         self.stage_seconds: dict[str, float] = dict.fromkeys(STAGES, 0.0)
         self.images_read = 0
+        self.vehicle_cache_hits = 0
         self._ocr: Any = None
 
     def fit(self, ctx: FitContext) -> None:
@@ -113,48 +116,59 @@ class PlateReaderBase(Reader):
         return {**super().describe(), "vehicles": self.vehicle_source, **{k: getattr(self, k) for k in options}}
 
     def read(self, images: Tensor, hints: ReadHints | None = None) -> list[list[PlateRead]]:
-        """Read the plates of every image; see ``Reader.read``. Also sets ``last_trace``."""
+        """Read the plates of every image; see ``Reader.read``. Also sets ``last_trace``.
+
+        The plate crops of all images are recognised together (``read_plates`` batches them by size).
+        """
         if images.ndim != 4 or images.shape[1] != 3:
             raise ValueError(f"images must be (B, 3, H, W), got shape {tuple(images.shape)}")
         t0 = time.perf_counter()
         vehicles = self._vehicles(images, hints)
         self.stage_seconds["vehicles"] += time.perf_counter() - t0
         rgb = (images.detach().clamp(0, 1) * 255).round().byte().permute(0, 2, 3, 1).cpu().numpy()
-        self.last_trace = [self._read_one(np.ascontiguousarray(im), boxes) for im, boxes in zip(rgb, vehicles)]
+        traces, crops = [], []
+        for im, boxes in zip(rgb, vehicles):
+            trace, image_crops = self._find_plates(np.ascontiguousarray(im), boxes)
+            traces.append(trace)
+            crops.append(image_crops)
+        t0 = time.perf_counter()
+        results = iter(read_plates(self.ocr, [c for image_crops in crops for c in image_crops], self.plate_format))
+        self.stage_seconds["ocr"] += time.perf_counter() - t0
+        for trace in traces:
+            candidates = []
+            for _, box in trace.plates:
+                result = next(results)
+                trace.raw_texts.append((result.raw, result.text, result.score))
+                if len(result.text) >= self.min_chars:
+                    candidates.append(PlateRead(result.text, (float(box[0]), float(box[1]), float(box[2]),
+                                                              float(box[3])), result.score))
+            trace.reads = _deduplicate(candidates)
+        self.last_trace = traces
         self.images_read += len(rgb)
-        return [trace.reads for trace in self.last_trace]
+        return [trace.reads for trace in traces]
 
     def _vehicles(self, images: Tensor, hints: ReadHints | None) -> list[list[Box]]:
         raise NotImplementedError
 
-    def _read_one(self, image: np.ndarray, vehicles: list[Box]) -> StageTrace:
+    def _find_plates(self, image: np.ndarray, vehicles: list[Box]) -> tuple[StageTrace, list[np.ndarray]]:
+        """Stages 1-2 on one (H, W, 3) uint8 image: the trace so far and one crop per plate found."""
         trace = StageTrace(vehicles=vehicles)
         hw = image.shape[:2]
         crops = []
+        t0 = time.perf_counter()
         for index, vehicle in enumerate(vehicles):
             if vehicle[2] - vehicle[0] < self.min_vehicle_width_px:
                 continue
             x0, y0, x1, y1 = expand_box(vehicle, self.vehicle_margin, hw)
             y0 += int(self.plate_band_top * (y1 - y0))
             trace.searched.append((x0, y0, x1, y1))
-            t0 = time.perf_counter()
             for px0, py0, px1, py1 in self._detect(image[y0:y1, x0:x1]):
                 box = (px0 + x0, py0 + y0, px1 + x0, py1 + y0)
                 cx0, cy0, cx1, cy1 = _grow(box, max(1, round(self._crop_margin * (box[3] - box[1]))), hw)
                 trace.plates.append((index, box))
                 crops.append(image[cy0:cy1, cx0:cx1])
-            self.stage_seconds["plates"] += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        results = read_plates(self.ocr, crops, self.plate_format)
-        self.stage_seconds["ocr"] += time.perf_counter() - t0
-        candidates = []
-        for (_, box), result in zip(trace.plates, results):
-            trace.raw_texts.append((result.raw, result.text, result.score))
-            if len(result.text) >= self.min_chars:
-                candidates.append(PlateRead(result.text, (float(box[0]), float(box[1]), float(box[2]), float(box[3])),
-                                            result.score))
-        trace.reads = _deduplicate(candidates)
-        return trace
+        self.stage_seconds["plates"] += time.perf_counter() - t0
+        return trace, crops
 
     @property
     def _crop_margin(self) -> float:
@@ -169,7 +183,11 @@ class PlateReaderBase(Reader):
 
 
 class Lpdr(PlateReaderBase):
-    """LPDR with vehicles from a segmentation network (``hints.segment``): the realistic attack."""
+    """LPDR with vehicles from a segmentation network (``hints.segment``): the realistic attack.
+
+    Vehicles are found once per image and segmenter within a process (``_VEHICLES``); a batch with
+    any image not seen before is segmented whole. ``vehicle_cache_hits`` counts images served from it.
+    """
 
     name: ClassVar[str] = "lpdr"
     vehicle_source: ClassVar[str] = "segmentation"
@@ -184,11 +202,43 @@ class Lpdr(PlateReaderBase):
         if hints is None or hints.segment is None:
             raise ValueError("lpdr needs ReadHints(segment=...) (a network mapping images to Cityscapes train "
                              "ids); got no segment callable. Use lpdr-oracle to read with ground-truth vehicles.")
-        labels = hints.segment(images)
-        if tuple(labels.shape) != (images.shape[0], *images.shape[2:]):
-            raise ValueError(f"hints.segment returned shape {tuple(labels.shape)}, expected (B, H, W) = "
-                             f"{(images.shape[0], *images.shape[2:])}")
-        return [segmentation_vehicles(m) for m in labels.detach().cpu().numpy()]
+        found = _segmented_vehicles(hints.segment)
+        keys = [content_key(im) for im in images]
+        if found is None or any(k not in found for k in keys):
+            # The whole batch, as a reader without the cache would: the same segmentation, bit for bit.
+            labels = hints.segment(images)
+            if tuple(labels.shape) != (images.shape[0], *images.shape[2:]):
+                raise ValueError(f"hints.segment returned shape {tuple(labels.shape)}, expected (B, H, W) = "
+                                 f"{(images.shape[0], *images.shape[2:])}")
+            boxes = [segmentation_vehicles(m) for m in labels.detach().cpu().numpy()]
+            if found is None:
+                return boxes
+            found.update(zip(keys, boxes))
+        else:
+            self.vehicle_cache_hits += len(keys)
+        return [list(found[k]) for k in keys]
+
+
+_VEHICLES: weakref.WeakKeyDictionary[Any, dict[str, list[Box]]] = weakref.WeakKeyDictionary()
+"""Vehicles found by segmentation, per segmenter (held weakly: the entry lives as long as the run's
+segmenter does) and per image content, so every lpdr chain that reads the same image with the same
+segmenter segments it once."""
+
+
+def _segmented_vehicles(segment: Any) -> dict[str, list[Box]] | None:
+    """The vehicle cache of one segmenter, or None when it cannot be referenced weakly (no caching)."""
+    try:
+        return _VEHICLES.setdefault(segment, {})
+    except TypeError:
+        return None
+
+
+def content_key(image: Tensor) -> str:
+    """Identity of one image's content: BLAKE2b of its shape, dtype and bytes (32 hex digits)."""
+    array = image.detach().cpu().contiguous().numpy()
+    digest = hashlib.blake2b(f"{array.shape}{array.dtype}".encode(), digest_size=16)
+    digest.update(array.tobytes())
+    return digest.hexdigest()
 
 
 class LpdrOracle(PlateReaderBase):

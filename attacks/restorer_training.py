@@ -136,7 +136,8 @@ def random_crops(images: list[Tensor], n: int, crop_px: int, generator: torch.Ge
 
 
 def train_restorer(model: nn.Module, next_batch: Callable[[torch.Generator], tuple[Tensor, Tensor]],
-                   steps: int, device: str, seed: int) -> list[float]:
+                   steps: int, device: str, seed: int,
+                   checkpoint: Callable[[int, nn.Module], None] | None = None) -> list[float]:
     """Train ``model`` in place with NAFNet's recipe (module docs).
 
     Args:
@@ -145,6 +146,9 @@ def train_restorer(model: nn.Module, next_batch: Callable[[torch.Generator], tup
         steps: Optimiser steps (0 leaves the model untouched).
         device: Torch device to train on; the model is moved there and back to the CPU.
         seed: Seeds the batch generator (weights are initialised by the caller).
+        checkpoint: Called as ``checkpoint(step, model)`` after every optimiser step (1-based), e.g.
+            to score the model on held-out images during one long fit; it must leave the model's
+            weights alone (the loop puts the model back in train mode afterwards).
 
     Returns:
         The loss (negative PSNR, dB) of every step.
@@ -164,6 +168,9 @@ def train_restorer(model: nn.Module, next_batch: Callable[[torch.Generator], tup
         optimizer.step()
         schedule.step()
         losses.append(loss.item())
+        if checkpoint is not None:
+            checkpoint(step + 1, model)
+            model.train()
         if (step + 1) % max(steps // 10, 1) == 0:
             log.info("step %d/%d: %.2f dB (%.1f s)", step + 1, steps, -loss.item(), time.perf_counter() - t0)
     return losses

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime as _dt
 import logging
 import os
@@ -79,6 +80,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="frames of a static plate for the video bound (default 30; T = 1 is always reported)")
     run.add_argument("--dry-run", action="store_true",
                      help="print the task plan (cached or to compute, measured cost per task) and compute nothing")
+    run.add_argument("--profile-time", action="store_true",
+                     help="profile every computed task (cProfile, peak memory): profile.json and profile.md in --out")
     train = sub.add_parser("train", help="train (or load) a co-designed lens; under torchrun, data-parallel over the ranks")
     train.add_argument("--lens", required=True, choices=_codesign_lenses(), help="co-design scheme registered as a lens")
     train.add_argument("--profile", default="quick", choices=list(PROFILES), help="run size (default: quick)")
@@ -163,7 +166,7 @@ def cmd_list() -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from benchmark import api
+    from benchmark import api, profiling
     from benchmark.profiles import get_profile
 
     options = dict(lenses=args.lens, attacks=args.attack, profile=args.profile, seeds=args.seeds,
@@ -173,7 +176,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(api.plan(**options).render())
         return 0
     out = args.out or Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    results = api.run(**options, out=out, meta={"command": sys.argv})
+    profiled = (profiling.profiled(out, get_profile(args.profile).n_val, args.device, args.executor)
+                if args.profile_time else contextlib.nullcontext())
+    with profiled:
+        results = api.run(**options, out=out, meta={"command": sys.argv})
     print((out / "table.md").read_text())
     if args.publish:
         from benchmark import leaderboard

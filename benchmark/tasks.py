@@ -25,7 +25,7 @@ import torch
 
 import attacks
 import lenses
-from benchmark import task_costs
+from benchmark import profiling, task_costs
 from benchmark.attacker_objects import load as load_attacker
 from benchmark.budget import BudgetExceeded, time_budget
 from benchmark.cache import CHECKSUM_SUFFIX, ArtifactCache, discard, exclusive, read_verified, write_verified
@@ -131,7 +131,8 @@ def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
         staging = directory / f".{task.key}.staging-{os.getpid()}-{time.monotonic_ns()}"
         staging.mkdir(parents=True)
         t0 = time.perf_counter()
-        result = _KINDS[task.kind](task, cfg, staging)
+        with profiling.task_scope(task):  # a no-op unless the run is profiled (--profile-time)
+            result = _KINDS[task.kind](task, cfg, staging)
         wall_s = time.perf_counter() - t0
         for row in result.rows:
             row.provenance["wall_s"] = wall_s

@@ -8,12 +8,16 @@ alphabet to plate characters. Text is normalised to upper-case letters and digit
 from __future__ import annotations
 
 import dataclasses
+import math
+import sys
 from typing import Any
 
 import cv2
 import numpy as np
+import torch
 
-__all__ = ["PLATE_ALPHABET", "OcrResult", "apply_format", "normalise", "prepare_crop", "read_plate", "read_plates", "text_box"]
+__all__ = ["PLATE_ALPHABET", "OcrResult", "apply_format", "normalise", "padded_width", "prepare_crop", "read_plate",
+           "read_plates", "recognize_rows", "SharedFeatures", "text_box"]
 
 PLATE_ALPHABET = "ABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789"
 """Characters the recognizer may output (EasyOCR ``allowlist``)."""
@@ -103,11 +107,12 @@ def read_plate(ocr: Any, crop_rgb: np.ndarray, plate_format: str | None = None) 
 
 
 def read_plates(ocr: Any, crops_rgb: list[np.ndarray], plate_format: str | None = None) -> list[OcrResult]:
-    """Read several plate crops in one batched recognizer pass.
+    """Read several plate crops, batched by the width the recognizer pads them to.
 
-    Each crop is prepared by ``prepare_crop``; the prepared crops are stacked into one canvas,
-    one ``OCR_HEIGHT_PX`` row each, and recognised as one batch (EasyOCR's per-call overhead
-    dominates single small crops).
+    Each crop is prepared by ``prepare_crop``. EasyOCR's ``recognize`` reads one box at a time on
+    the CPU, padding each crop (right, by repeating its last column) to the next multiple of its
+    input height; crops that pad to the same width are therefore stacked here and recognised in one
+    forward pass (``recognize_rows``): every crop reaches the network exactly as it would alone.
 
     Args:
         ocr: An ``easyocr.Reader`` (see ``attacks.plates.easyocr_models.load_easyocr``).
@@ -115,28 +120,91 @@ def read_plates(ocr: Any, crops_rgb: list[np.ndarray], plate_format: str | None 
         plate_format: Plate syntax for ``apply_format`` ('L' letter, 'D' digit), or None.
 
     Returns:
-        Per crop, the best line's normalised text, its raw string and confidence in [0, 1];
+        Per crop, the recognised line's normalised text, its raw string and confidence in [0, 1];
         "" with score 0 when the crop is empty or nothing was recognised.
     """
     results = [OcrResult("", "", 0.0)] * len(crops_rgb)
     rows = {i: prepare_crop(c) for i, c in enumerate(crops_rgb) if c.ndim == 3 and min(c.shape[:2]) >= 2}
-    if not rows:
-        return results
-    order = list(rows)
-    canvas = np.full((OCR_HEIGHT_PX * len(order), max(r.shape[1] for r in rows.values())), 255, np.uint8)
-    boxes = []
-    for slot, i in enumerate(order):
-        row = rows[i]
-        y0 = slot * OCR_HEIGHT_PX
-        canvas[y0:y0 + row.shape[0], :row.shape[1]] = row
-        boxes.append([0, row.shape[1], y0, y0 + row.shape[0]])
-    lines = ocr.recognize(canvas, horizontal_list=boxes, free_list=[], allowlist=PLATE_ALPHABET, detail=1,
-                          batch_size=len(boxes))
-    best: dict[int, tuple[str, float]] = {}
-    for box, raw, score in lines:
-        slot = int(box[0][1]) // OCR_HEIGHT_PX
-        if slot not in best or float(score) > best[slot][1]:
-            best[slot] = (raw, float(score))
-    for slot, (raw, score) in best.items():
-        results[order[slot]] = OcrResult(apply_format(normalise(raw), plate_format), raw, score)
+    for i, (raw, score) in recognize_rows(ocr, rows).items():
+        results[i] = OcrResult(apply_format(normalise(raw), plate_format), raw, score)
     return results
+
+
+_MODEL_PARTS = ("FeatureExtraction", "AdaptiveAvgPool", "SequenceModeling", "Prediction")
+
+
+class SharedFeatures(torch.nn.Module):
+    """EasyOCR's recognizer (``easyocr.model.vgg_model.Model``, english_g2) with its convolutional
+    feature extractor run once on a batch and the rest run per crop.
+
+    On the CPU EasyOCR quantizes the BiLSTM and the classifier dynamically: their activations are
+    scaled by the min / max of the whole input, so a crop's output depends on the crops batched
+    with it. The convolutions (most of the time) do not; running the quantized tail one crop at a
+    time keeps every crop's output bit-identical to reading it alone.
+    """
+
+    def __init__(self, model: Any) -> None:  # EasyOCR's Model: submodules named in _MODEL_PARTS
+        super().__init__()
+        self.model = model
+
+    def forward(self, image: torch.Tensor, text: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, 1, 64, W) normalised crops -> (B, T, classes) per-column class scores; ``text`` is unused (CTC)."""
+        m: Any = self.model
+        features = m.FeatureExtraction(image)
+        out = []
+        for one in features.split(1):
+            sequence = m.AdaptiveAvgPool(one.permute(0, 3, 1, 2)).squeeze(3)
+            out.append(m.Prediction(m.SequenceModeling(sequence).contiguous()))
+        return torch.cat(out)
+
+
+def padded_width(row: np.ndarray, height_px: int = OCR_HEIGHT_PX) -> int:
+    """Width (pixels) EasyOCR pads a single-line crop to: its aspect ratio (>= 1, inverted for a tall
+    crop) rounded up, times the recognizer's input height (``easyocr.utils.get_image_list``)."""
+    h, w = row.shape[:2]
+    return math.ceil(max(max(w / h, h / w), 1.0)) * height_px
+
+
+def recognize_rows(ocr: Any, rows: dict[int, np.ndarray]) -> dict[int, tuple[str, float]]:
+    """EasyOCR's english_g2 on prepared crops, one batch per padded width.
+
+    Does what ``ocr.recognize(image, horizontal_list=[box], allowlist=PLATE_ALPHABET)`` does per crop
+    (the same resize, padding, second low-contrast pass and greedy decoding, through EasyOCR's own
+    ``get_image_list`` and ``get_text``), with every crop of one padded width in one batch through
+    ``SharedFeatures`` (a recognizer of another layout reads one crop at a time).
+
+    Args:
+        ocr: An ``easyocr.Reader``.
+        rows: Key -> (h, w) uint8 single-channel crop (``prepare_crop``), h, w >= 1.
+
+    Returns:
+        Key -> (raw string, confidence in [0, 1]) for every crop the recognizer returned a line for.
+    """
+    from easyocr.recognition import get_text
+    from easyocr.utils import get_image_list
+
+    model_height = sys.modules[type(ocr).__module__].imgH
+    recognizer: torch.nn.Module = ocr.recognizer
+    batched = all(hasattr(getattr(recognizer, "module", recognizer), part) for part in _MODEL_PARTS)
+    if batched:
+        recognizer = SharedFeatures(getattr(recognizer, "module", recognizer))
+    ignore = "".join(sorted(set(ocr.character) - set(PLATE_ALPHABET)))
+    groups: dict[int, list[int]] = {}
+    for key, row in rows.items():
+        groups.setdefault(padded_width(row, model_height), []).append(key)
+    read: dict[int, tuple[str, float]] = {}
+    for keys in groups.values():
+        canvas = np.full((OCR_HEIGHT_PX * len(keys), max(rows[k].shape[1] for k in keys)), 255, np.uint8)
+        boxes = []
+        for slot, key in enumerate(keys):
+            row, y0 = rows[key], slot * OCR_HEIGHT_PX
+            canvas[y0:y0 + row.shape[0], :row.shape[1]] = row
+            boxes.append([0, row.shape[1], y0, y0 + row.shape[0]])
+        image_list, max_width = get_image_list(boxes, [], canvas, model_height=model_height)
+        lines = get_text(ocr.character, model_height, int(max_width), recognizer, ocr.converter, image_list,
+                         ignore, "greedy", 5, len(image_list) if batched else 1, 0.1, 0.5, 0.003, 0, ocr.device)
+        for box, raw, score in lines:
+            key = keys[int(box[0][1]) // OCR_HEIGHT_PX]
+            if key not in read or float(score) > read[key][1]:
+                read[key] = (raw, float(score))
+    return read

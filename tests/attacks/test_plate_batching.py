@@ -1,0 +1,114 @@
+"""Batched plate reading (attacks/plates/ocr.py, attacks/lpdr.py) reads exactly what the reader read before
+it batched (one image per pass, EasyOCR's own ``recognize`` one crop at a time: tests/plate_reference.py),
+and the lpdr reader segments each image once per segmenter."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+import attacks
+import attacks.lpdr
+from attacks.plates import ocr as plate_ocr
+from attacks.plates.easyocr_models import load_easyocr
+from benchmark.scenes import load_scenes
+from plate_reference import recognize_one_at_a_time  # tests/plate_reference.py
+
+
+def _scenes(size: tuple[int, int], n: int):
+    scenes = load_scenes("synthetic", "val", n, size, 0)
+    images = torch.from_numpy(np.stack([s.image for s in scenes])).permute(0, 3, 1, 2).float()
+    return images, attacks.ReadHints(vehicle_boxes=[[v.box_xyxy for v in s.vehicles] for s in scenes])
+
+
+def _as_tuples(reads):
+    return [[(r.text, r.box_xyxy, r.score) for r in per_image] for per_image in reads]
+
+
+@pytest.mark.parametrize("size,n", [((128, 256), 4), ((512, 1024), 3)], ids=["smoke", "quick"])
+def test_batched_reads_equal_reading_each_crop_alone(monkeypatch, size, n):
+    """Same strings, boxes and scores (bit for bit) as one image per pass and one recognizer pass per crop."""
+    images, hints = _scenes(size, n)
+    reader = attacks.load("lpdr-oracle")
+    reader.fit(attacks.FitContext())
+    batched = reader.read(images, hints)
+    crops = sum(len(t.plates) for t in reader.last_trace)
+    with monkeypatch.context() as mp:
+        mp.setattr(attacks.lpdr, "read_plates", recognize_one_at_a_time)
+        alone = [reader.read(images[i:i + 1], attacks.ReadHints(vehicle_boxes=hints.vehicle_boxes[i:i + 1]))[0]
+                 for i in range(n)]
+    assert _as_tuples(batched) == _as_tuples(alone)
+    if size == (512, 1024):
+        assert crops >= 5 and sum(map(len, batched)) >= 2  # the comparison covered real reads
+
+
+def test_crops_of_several_widths_are_grouped_and_read_like_alone():
+    ocr = load_easyocr(False)
+    rng = np.random.default_rng(0)
+    images, hints = _scenes((512, 1024), 2)
+    reader = attacks.load("lpdr-oracle")
+    reader.read(images, hints)
+    crops = [c for c in _plate_crops(reader, images)]
+    crops.append(rng.integers(0, 255, (20, 90, 3), dtype=np.uint8))  # noise: read with low confidence
+    crops.append(np.zeros((0, 4, 3), np.uint8))                       # empty: reads ""
+    widths = {plate_ocr.padded_width(plate_ocr.prepare_crop(c)) for c in crops if c.size}
+    assert len(widths) >= 2
+    assert plate_ocr.read_plates(ocr, crops, "LLDDDLL") == recognize_one_at_a_time(ocr, crops, "LLDDDLL")
+
+
+def _plate_crops(reader, images):
+    rgb = (images.clamp(0, 1) * 255).round().byte().permute(0, 2, 3, 1).numpy()
+    for image, trace in zip(rgb, reader.last_trace):
+        for _, (x0, y0, x1, y1) in trace.plates:
+            yield image[y0:y1, x0:x1]
+
+
+def test_shared_features_equal_the_recognizer_crop_by_crop():
+    model = load_easyocr(False).recognizer
+    batch = torch.rand(3, 1, 64, 192) * 2 - 1
+    with torch.no_grad():
+        alone = torch.cat([model(batch[i:i + 1], None) for i in range(3)])
+        shared = plate_ocr.SharedFeatures(model)(batch)
+        together = model(batch, None)
+    assert torch.equal(shared, alone)
+    # Why the tail runs per crop: the quantized tail of a plain batch depends on its neighbours.
+    assert not torch.equal(together, alone)
+
+
+def test_padded_width_is_easyocr_s():
+    assert plate_ocr.padded_width(np.zeros((64, 64), np.uint8)) == 64
+    assert plate_ocr.padded_width(np.zeros((64, 65), np.uint8)) == 128
+    assert plate_ocr.padded_width(np.zeros((40, 200), np.uint8)) == 320
+    assert plate_ocr.padded_width(np.zeros((100, 30), np.uint8)) == 256  # tall: ratio inverted, 3.33 -> 4
+
+
+class CountingSegmenter:
+    """Train ids of every scene (one car per scene's vehicles) and how many images it segmented."""
+
+    def __init__(self, scenes) -> None:
+        self.labels = torch.from_numpy(np.stack([s.labels for s in scenes]).astype(np.int64))
+        self.images_seen = 0
+
+    def __call__(self, images: torch.Tensor) -> torch.Tensor:
+        self.images_seen += images.shape[0]
+        return self.labels[: images.shape[0]]
+
+
+def test_lpdr_segments_each_image_once_per_segmenter():
+    scenes = load_scenes("synthetic", "val", 2, (128, 256), 0)
+    images = torch.from_numpy(np.stack([s.image for s in scenes])).permute(0, 3, 1, 2).float()
+    segment = CountingSegmenter(scenes)
+    first, second = attacks.load("lpdr"), attacks.load("lpdr")
+    reads = first.read(images, attacks.ReadHints(segment=segment))
+    assert segment.images_seen == 2 and first.vehicle_cache_hits == 0
+    assert second.read(images, attacks.ReadHints(segment=segment)) == reads  # another chain, same images
+    assert segment.images_seen == 2 and second.vehicle_cache_hits == 2
+    assert [t.vehicles for t in second.last_trace] == [t.vehicles for t in first.last_trace]
+    other = CountingSegmenter(scenes)  # another network: its own vehicles
+    second.read(images, attacks.ReadHints(segment=other))
+    assert other.images_seen == 2
+    changed = images.clone()
+    changed[1, :, 0, 0] += 0.5  # one pixel: another image; the batch is segmented whole again
+    second.read(changed, attacks.ReadHints(segment=segment))
+    assert segment.images_seen == 4
