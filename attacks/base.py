@@ -134,10 +134,13 @@ class ReadHints:
         segment: A segmentation network as a callable, images (B, 3, H, W) in [0, 1] ->
             Cityscapes train ids (B, H, W): the lens's own utility network for sensor images, a
             clean-trained one for sharp or restored images; None when there is none.
+        plate_boxes: Ground-truth plate boxes (x0, y0, x1, y1) per image, in pixels, for readers
+            that are told where the plates are (``ideal-observer``); None when not offered.
     """
 
     vehicle_boxes: list[list[tuple[float, float, float, float]]] | None = None
     segment: Callable[[Tensor], Tensor] | None = None
+    plate_boxes: list[list[tuple[float, float, float, float]]] | None = None
 
 
 def box_iou(a: tuple[float, ...], b: tuple[float, ...]) -> float:

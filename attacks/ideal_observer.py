@@ -2,7 +2,7 @@
 
 The attacker has the camera (PSF per channel, electrons per unit radiance, read noise and ADC), the
 plate format and the font and layout (the scenes' own renderer, ``attacks.plates.plate_render``),
-and the true plate boxes (``PlateBoxHints.plate_boxes``, like ``lpdr-oracle``'s vehicle boxes). For
+and the true plate boxes (``ReadHints.plate_boxes``, like ``lpdr-oracle``'s vehicle boxes). For
 each box it recovers the raw electrons from the sensor image (the demosaic keeps each raw value at
 its own site) and scores a candidate string by its Gaussian log-likelihood: the string is rendered
 at the box's size, blurred with the PSF, converted to electrons, and fitted to the observed sites
@@ -26,7 +26,6 @@ the starting strings with and without it. Cost: about 3 x beam x 134 renderings 
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any, ClassVar
 
 import numpy as np
@@ -38,16 +37,9 @@ from attacks.plates.plate_render import PLATE_FORMAT, format_alphabets, plate_fo
 from lenses.raw_likelihood import raw_mean_electrons
 from lenses.sensor import bayer_masks
 
-__all__ = ["IdealObserverReader", "PlateBoxHints"]
+__all__ = ["IdealObserverReader"]
 
 REFERENCE_BACKGROUND = (236, 236, 228)  # rendering colour; the per-channel gain absorbs the true tint
-
-
-@dataclasses.dataclass(frozen=True)
-class PlateBoxHints(ReadHints):
-    """``ReadHints`` with the true plate boxes (x0, y0, x1, y1) per image, in pixels."""
-
-    plate_boxes: list[list[tuple[float, float, float, float]]] | None = None
 
 
 class IdealObserverReader(Reader):
@@ -62,6 +54,7 @@ class IdealObserverReader(Reader):
     name: ClassVar[str] = "ideal-observer"
     threat_model: ClassVar[ThreatModel] = ThreatModel.LENS_ACCESS
     requires: ClassVar[frozenset[str]] = frozenset({"lens"})
+    run_by_default: ClassVar[bool] = False  # seconds per plate: run it by name (--attack ideal-observer)
 
     def __init__(self, beam: int = 3, max_sweeps: int = 4, min_width_px: int = 8) -> None:
         if beam < 1 or max_sweeps < 1:
@@ -104,9 +97,9 @@ class IdealObserverReader(Reader):
             raise RuntimeError("ideal-observer must be fitted (fit(ctx) with ctx.lens) before reading")
         if images.ndim != 4 or images.shape[1] != 3:
             raise ValueError(f"images must be (B, 3, H, W), got shape {tuple(images.shape)}")
-        boxes = getattr(hints, "plate_boxes", None)
+        boxes = None if hints is None else hints.plate_boxes
         if boxes is None or len(boxes) != images.shape[0]:
-            raise ValueError("ideal-observer needs PlateBoxHints(plate_boxes=...) with one list of true plate boxes "
+            raise ValueError("ideal-observer needs ReadHints(plate_boxes=...) with one list of true plate boxes "
                              f"per image ({images.shape[0]} images); got {None if boxes is None else len(boxes)}")
         cam = self._camera
         raw = self._raw_electrons(images.detach().to(torch.float64).cpu(), cam)

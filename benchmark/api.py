@@ -316,6 +316,7 @@ def write_run_outputs(out: Path, results: Results) -> None:
     """results.json (schema rows + their settings), tables, pictures and charts of a run."""
     from benchmark import report
     from benchmark.charts.run_charts import write_run_charts
+    from benchmark.observer.published import write_run_check
     results.write(out / "results.json")
     output = results.output
     assert output is not None, "only a run's own results carry its pictures and plate records"
@@ -325,6 +326,7 @@ def write_run_outputs(out: Path, results: Results) -> None:
         report.write_plate_records(out, output.plates)
     write_run_charts(out, results.rows, output.plates, output.bound_curves)
     report.write_tables(out, results.rows)
+    write_run_check(out, output.plates, output.lens_info)  # ceiling_check.json; violations logged as ERROR
 
 
 # ---- the dry run ----------------------------------------------------------------------------------

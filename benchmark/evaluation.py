@@ -140,7 +140,8 @@ def read_plates(reader: attacks.Reader, images: torch.Tensor | Sequence[torch.Te
     t0 = time.perf_counter()
     for start, batch in shape_batches(images, batch_size):
         chunk = scenes[start:start + batch.shape[0]]
-        hints = attacks.ReadHints(vehicle_boxes=[[v.box_xyxy for v in s.vehicles] for s in chunk], segment=segment)
+        hints = attacks.ReadHints(vehicle_boxes=[[v.box_xyxy for v in s.vehicles] for s in chunk], segment=segment,
+                                  plate_boxes=[[p.box_xyxy for p in s.plates] for s in chunk])
         with torch.no_grad():
             reads = check_reads(reader.name, reader.read(batch.to(device), hints), len(chunk))
         for r, scene in zip(reads, chunk):

@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import dataclasses
 import html
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from matplotlib.ticker import MaxNLocator
 
@@ -21,7 +22,7 @@ from benchmark.cache import atomic_write_text
 from benchmark.charts.tradeoff import TradeoffPoint, tradeoff_points
 from benchmark.findings import check_findings
 from benchmark.leaderboard_entries import Entry
-from benchmark.leaderboard_tables import MAIN_COLUMNS, pm
+from benchmark.leaderboard_tables import pm, table_columns
 
 ANY_THREAT = "any attacker"
 # Colour per lens, in order of first appearance (colour-blind-safe "Tableau 10").
@@ -44,7 +45,7 @@ tbody tr:nth-child(even){background:#fafafa}
 svg .point{cursor:pointer}svg .axis{stroke:#444}svg .grid{stroke:#e6e6e6}svg text{font-size:11px;fill:#333}
 #tip{position:absolute;display:none;background:#fff;border:1px solid #888;border-radius:4px;padding:.3rem .5rem;
 font-size:.8rem;white-space:pre;pointer-events:none;box-shadow:0 2px 6px rgba(0,0,0,.2)}
-img{max-width:100%}details{margin:.3rem 0}summary{cursor:pointer}.count{color:#555;font-size:.85rem}
+.alarm{color:#b00020}tr.violation{background:#fde7e9}img{max-width:100%}details{margin:.3rem 0}summary{cursor:pointer}.count{color:#555;font-size:.85rem}
 """
 
 _SCRIPT = """
@@ -120,14 +121,16 @@ def _filter_attrs(profile: str, scenes: str, threat: str) -> str:
     return f'data-filtered="1" data-profile="{_e(profile)}" data-scenes="{_e(scenes)}" data-threat="{_e(threat)}"'
 
 
-def tradeoff_table(entries: Sequence[Entry]) -> str:
-    """The sortable trade-off table: MAIN_COLUMNS plus the threat model, one line per entry and threat view."""
-    head = "".join(f"<th>{_e(c.header)}</th>" for c in MAIN_COLUMNS[:4]) + "<th>threat model</th>"
-    head += "".join(f"<th>{_e(c.header)}</th>" for c in MAIN_COLUMNS[4:])
+def tradeoff_table(entries: Sequence[Entry], study: Mapping[str, Any] | None = None) -> str:
+    """The sortable trade-off table: the columns of the markdown table (`table_columns(study)`) plus
+    the threat model, one line per entry and threat view."""
+    columns = table_columns(study)
+    head = "".join(f"<th>{_e(c.header)}</th>" for c in columns[:4]) + "<th>threat model</th>"
+    head += "".join(f"<th>{_e(c.header)}</th>" for c in columns[4:])
     lines = []
     for e in entries:
         for threat, attacks in threat_views(e):
-            cells = [c.cell(e, attacks) for c in MAIN_COLUMNS]
+            cells = [c.cell(e, attacks) for c in columns]
             cells = cells[:4] + [(threat, None)] + cells[4:]
             tds = "".join(f'<td data-sort="{_e(text if value is None else repr(value))}">{_e(text)}</td>'
                           for text, value in cells)
@@ -222,8 +225,25 @@ def findings_html(entries: Sequence[Entry]) -> str:
             f"<th>a - b</th><th>verdict</th></tr></thead><tbody>{rows}</tbody></table>")
 
 
-def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequence[Path]) -> str:
-    """The whole page as text (deterministic: the same entries give the same bytes)."""
+def violations_html(found: Sequence[tuple[Entry, Any]]) -> str:
+    """The "Ceiling violations" section's body: every reader above its lens's ideal-observer ceiling."""
+    if not found:
+        return ("<p>None: every reader of every entry whose lens the ideal-observer study covers reads at or below "
+                "its ceiling (T = 1, upper 95 % limit; accuracy over all readable plates, Wilson 95 %).</p>")
+    rows = "".join(f'<tr class="violation"><td>{_e(e.lens)}</td><td>{_e(e.profile)}</td><td>{_e(e.scenes)}</td>'
+                   f"<td>{_e(v.measured.reader)}</td><td>{100 * v.measured.accuracy:.1f}</td>"
+                   f"<td>{100 * v.measured.interval[0]:.1f}-{100 * v.measured.interval[1]:.1f}</td>"
+                   f"<td>{v.measured.n_plates}</td><td>{100 * v.ceiling_high:.1f}</td></tr>" for e, v in found)
+    return (f'<p class="alarm"><strong>{len(found)} reader(s) beat the ideal observer\'s ceiling: a modelling or '
+            "scoring error (benchmark.observer.consistency).</strong></p><table><thead><tr><th>lens</th>"
+            "<th>profile</th><th>scenes</th><th>reader</th><th>plate acc %</th><th>95 % interval</th><th>plates</th>"
+            f"<th>ceiling % (upper 95 %)</th></tr></thead><tbody>{rows}</tbody></table>")
+
+
+def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequence[Path],
+              study: Mapping[str, Any] | None = None, violations: Sequence[tuple[Entry, Any]] = ()) -> str:
+    """The whole page as text (deterministic: the same entries give the same bytes); `study`: the
+    ideal-observer study, `violations`: the readers above its ceilings (benchmark.observer.published)."""
     lenses = list(dict.fromkeys(e.lens for e in entries))
     colours = {lens: _PALETTE[i % len(_PALETTE)] for i, lens in enumerate(lenses)}
     threats = [ANY_THREAT] + sorted({t for e in entries for t, _ in threat_views(e)} - {ANY_THREAT})
@@ -261,7 +281,8 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
         "mean ± standard deviation over the seeds listed. Worst case = the strongest attacker of the suite for that "
         "lens, or of the chosen threat model. Click a column header to sort.</p>",
         f'<div class="filters">{filters}<span class="count" id="shown"></span></div>',
-        "<h2>Utility against privacy</h2>", tradeoff_table(entries),
+        "<h2>Utility against privacy</h2>", tradeoff_table(entries, study),
+        "<h2>Ceiling violations</h2>", violations_html(violations),
         f'<h2>Utility against privacy, interactive</h2><div class="charts">{"".join(svgs)}</div>',
         "<h2>The paper's findings on these entries</h2>", findings_html(entries),
         "<h2>Samples per lens</h2>", "".join(per_lens) or "<p>No published sample images.</p>",
@@ -269,7 +290,8 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
         '<div id="tip" role="tooltip"></div>', f"<script>{_SCRIPT}</script>", "</body></html>", ""])
 
 
-def write_page(path: Path, entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequence[Path]) -> Path:
+def write_page(path: Path, entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequence[Path],
+               study: Mapping[str, Any] | None = None, violations: Sequence[tuple[Entry, Any]] = ()) -> Path:
     """Write the page to `path` (chart and picture paths are linked relative to its folder)."""
-    atomic_write_text(path, page_html(entries, charts, pictures))
+    atomic_write_text(path, page_html(entries, charts, pictures, study, violations))
     return path

@@ -14,14 +14,19 @@ from benchmark.charts.profiles import write_profile_chart
 from benchmark.charts.tradeoff import write_tradeoff_chart
 from benchmark.leaderboard_entries import LEADERBOARD, Entry, display_order, load_entries
 from benchmark.leaderboard_page import write_page
-from benchmark.leaderboard_tables import attacker_table, findings_table, main_table
+from benchmark.leaderboard_tables import attacker_table, findings_table, main_table, violations_table
+from benchmark.observer.published import entry_violations, load_study
 
 log = logging.getLogger(__name__)
 
 INTRO = ("Rendered by `python -m benchmark report` from `leaderboard/entries/*.json` (written by "
          "`python -m benchmark run ... --publish`); never edited by hand. Mean ± standard deviation over the seeds "
          "listed. Worst case = the strongest attacker of the suite for that lens; W_5% = the plate width below which "
-         "the attack-independent bound certifies that no attacker reads more than 5 % of plates. Publishing merges "
+         "the attack-independent bound certifies that no attacker reads more than 5 % of plates: Fano = the Gaussian "
+         "information bound (lenses.bound), ideal observer = the Bayesian ideal observer's ceiling "
+         "(benchmark.observer, `studies/ideal_observer.json`, T = 1 and 30 frames), shown only where the study "
+         "used the entry's own lens spec (else \"not computed\"); ceiling % at 32 px = the most any attacker can "
+         "read of 32 px plates exactly. Publishing merges "
          "with a stored entry of the same lens and profile: an attacker row keeps the seeds (listed in the attacker "
          "table) and the provenance of the run that measured it.")
 
@@ -51,13 +56,31 @@ def entry_charts(entries: list[Entry], charts: Path) -> list[Path]:
     ) if p is not None]
 
 
-def readme_text(entries: list[Entry], charts: list[Path], pictures: list[Path]) -> str:
+def observer_chart(directory: Path, entries: list[Entry], charts: Path) -> list[Path]:
+    """The ideal-observer ceiling against plate width with the entries' readers on it (if the study exists)."""
+    from benchmark.charts.ideal_observer import write_ideal_observer_chart
+    study = load_study(directory)
+    return [] if study is None else [write_ideal_observer_chart(study, entries, charts / "ideal_observer.png")]
+
+
+def violations_text(found: list) -> list[str]:
+    """The README's "Ceiling violations" section (never left out: it says so when there are none)."""
+    if not found:
+        return ["None: every reader of every entry whose lens the ideal-observer study covers reads at or below its "
+                "ceiling (T = 1, upper 95 % limit; the reader's accuracy over all readable plates, Wilson 95 %)."]
+    return [f"**{len(found)} reader(s) beat the ideal observer's ceiling: a modelling or scoring error "
+            "(benchmark.observer.consistency).**", "", violations_table(found)]
+
+
+def readme_text(entries: list[Entry], charts: list[Path], pictures: list[Path], study: dict | None = None,
+                violations: list | None = None) -> str:
     """The leaderboard README: tables, then the charts and the published pictures (paths relative)."""
     findings = findings_table(entries)
     text = ["# Leaderboard", "", INTRO, "",
             "The same tables, sortable and filterable by profile, scenes and threat model, with interactive "
             "charts: [index.html](index.html) (a self-contained page; open it from disk).", "",
-            "## Utility against privacy", "", main_table(entries), "",
+            "## Utility against privacy", "", main_table(entries, study), "",
+            "## Ceiling violations", "", *violations_text(violations or []), "",
             *(["## The paper's findings on these entries", "", findings, ""] if findings else []),
             "## Every attacker", "", attacker_table(entries), "", "## Charts", ""]
     text += [f"![{p.stem}](charts/{p.name})" for p in charts]
@@ -76,11 +99,14 @@ def render(directory: Path = LEADERBOARD) -> list[Path]:
     entries = display_order(load_entries(directory))
     charts = directory / "charts"
     charts.mkdir(parents=True, exist_ok=True)
-    written = entry_charts(entries, charts) + study_charts(directory, charts)
+    written = entry_charts(entries, charts) + study_charts(directory, charts) + observer_chart(directory, entries,
+                                                                                               charts)
     pictures = sorted((directory / "samples").glob("*.png")) if (directory / "samples").is_dir() else []
+    study = load_study(directory)
+    violations = entry_violations(entries, study)  # each one logged as an ERROR there
     readme = directory / "README.md"
-    atomic_write_text(readme, readme_text(entries, written, pictures))
-    page = write_page(directory / "index.html", entries, written, pictures)
+    atomic_write_text(readme, readme_text(entries, written, pictures, study, violations))
+    page = write_page(directory / "index.html", entries, written, pictures, study, violations)
     for path in (readme, *written, page):
         log.debug("wrote %s", path)
     return [readme, *written, page]
@@ -97,5 +123,5 @@ def update_readme(readme: Path, directory: Path = LEADERBOARD) -> bool:
     entries = display_order(load_entries(directory))
     head, rest = text.split(README_START, 1)
     _, tail = rest.split(README_END, 1)
-    atomic_write_text(readme, f"{head}{README_START}\n{main_table(entries)}\n{README_END}{tail}")
+    atomic_write_text(readme, f"{head}{README_START}\n{main_table(entries, load_study(directory))}\n{README_END}{tail}")
     return True

@@ -1,16 +1,21 @@
 """The leaderboard's tables, from its entries: the trade-off table, the findings and every attacker.
 
-The trade-off table's columns are defined once (``MAIN_COLUMNS``): the markdown table and the web
-page's sortable table are both rendered from them.
+The trade-off table's columns are defined once (``table_columns``: ``MAIN_COLUMNS`` with the ideal
+observer's beside the Fano bound's): the markdown table and the web page's sortable table are both
+rendered from them. The ideal-observer cells come from leaderboard/studies/ideal_observer.json and
+show only where the study's lens spec matches the entry's (benchmark.observer.published); else
+"not computed".
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 from benchmark.findings import check_findings
 from benchmark.leaderboard_entries import Entry, Stat
+from benchmark.observer.published import NOT_COMPUTED, study_record
 
 # A cell: its text and the number it sorts by (None: empty).
 Cell = tuple[str, float | None]
@@ -74,9 +79,31 @@ MAIN_COLUMNS = (
     Column("worst PSNR dB (attacker)", _worst("psnr_db", "restorer", 2)),
     Column("worst SSIM", _worst("ssim", "restorer", 3, named=False)),
     Column("worst plate acc % (chain)", _worst("plate_acc", "reader", 1, pct=True)),
-    Column("W_5% px (T=1)", _single("bound", "bound_width_eps_t1", ".0f")),
+    Column("W_5% px (Fano, T=1)", _single("bound", "bound_width_eps_t1", ".0f")),
     Column("lens img/s", _single("lens", "images_per_s", ".1f")),
 )
+_FANO = next(i for i, c in enumerate(MAIN_COLUMNS) if c.header.startswith("W_5% px (Fano"))
+
+
+def _observer(study: Mapping[str, Any] | None, frames: str, key: str, scale: float, fmt: str
+              ) -> Callable[[Entry, set[str] | None], Cell]:
+    def cell(e: Entry, attacks: set[str] | None) -> Cell:
+        record = study_record(study, e.lens, e.lens_spec)
+        value = None if record is None else record.get(frames, {}).get(key)
+        return (NOT_COMPUTED, None) if value is None else (format(value * scale, fmt), float(value * scale))
+    return cell
+
+
+def observer_columns(study: Mapping[str, Any] | None) -> tuple[Column, ...]:
+    """The ideal observer's plate ceiling at 32 px (T = 1) and its certified widths W_5% (T = 1, 30)."""
+    return (Column("ceiling % at 32 px (ideal observer, T=1)", _observer(study, "t1", "plate_ceiling_w32", 100, ".1f")),
+            Column("W_5% px (ideal observer, T=1)", _observer(study, "t1", "w5_plate_px", 1, ".0f")),
+            Column("W_5% px (ideal observer, T=30)", _observer(study, "t30", "w5_plate_px", 1, ".0f")))
+
+
+def table_columns(study: Mapping[str, Any] | None) -> tuple[Column, ...]:
+    """MAIN_COLUMNS with the ideal observer's columns after the Fano bound's W_5%."""
+    return MAIN_COLUMNS[:_FANO + 1] + observer_columns(study) + MAIN_COLUMNS[_FANO + 1:]
 
 
 def _markdown(head: Sequence[str], lines: Sequence[Sequence[str]]) -> str:
@@ -84,10 +111,20 @@ def _markdown(head: Sequence[str], lines: Sequence[Sequence[str]]) -> str:
     return "\n".join(out + ["| " + " | ".join(cells) + " |" for cells in lines])
 
 
-def main_table(entries: Sequence[Entry]) -> str:
-    """Utility against the worst case of every attacker, one line per entry (markdown)."""
-    return _markdown([c.header for c in MAIN_COLUMNS],
-                     [[c.cell(e, None)[0] for c in MAIN_COLUMNS] for e in entries])
+def main_table(entries: Sequence[Entry], study: Mapping[str, Any] | None = None) -> str:
+    """Utility against the worst case of every attacker, one line per entry (markdown); `study`: the
+    ideal-observer study (None: its columns read "not computed")."""
+    columns = table_columns(study)
+    return _markdown([c.header for c in columns], [[c.cell(e, None)[0] for c in columns] for e in entries])
+
+
+def violations_table(found: Sequence[tuple[Entry, Any]]) -> str:
+    """The readers above their lens's ideal-observer ceiling (benchmark.observer.published), markdown."""
+    return _markdown(["lens", "profile", "scenes", "reader", "plate acc %", "95 % interval", "plates",
+                      "ceiling % (upper 95 %)"],
+                     [[e.lens, e.profile, e.scenes, v.measured.reader, f"{100 * v.measured.accuracy:.1f}",
+                       f"{100 * v.measured.interval[0]:.1f}-{100 * v.measured.interval[1]:.1f}",
+                       str(v.measured.n_plates), f"{100 * v.ceiling_high:.1f}"] for e, v in found])
 
 
 def findings_table(entries: Sequence[Entry]) -> str:

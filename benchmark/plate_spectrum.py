@@ -12,6 +12,10 @@ Nyquist frequency, so the high frequencies come from the large plates only. A po
 A_c |nu|^-alpha (one exponent, per-channel amplitude) is fitted by least squares in log-log to the
 radial band [nx/4, nx]; it fills the table bins no crop covers and extends D beyond the table.
 
+Least radiance. `min_radiance` is, per channel, the minimum over every pixel of every crop: the
+darkest the plate shows (its ink), where the shot noise is least; `lenses.bound` puts the
+Gaussian bound's noise there so that the bound stays an upper bound.
+
 Scaling with plate width: a plate w px wide has per-pixel density S_w(f) = w^2 D(w f) (see
 `lenses.bound.PlateSpectrum`); its variance is the integral of D over |nu| < w/2, so it is constant
 once the band holds the content, and the content moves to lower frequencies as w grows.
@@ -77,8 +81,10 @@ def spectrum_from_crops(crops: list[np.ndarray], nx: int = 64, aspect: float = P
     radius = np.maximum(np.hypot(vy, vx), 1.0)
     table = np.where(covered, table, amplitude[:, None, None] * radius ** (-exponent))
     mean = np.mean([c.mean(axis=(0, 1)) for c in crops], axis=0)
+    least = np.min([c.min(axis=(0, 1)) for c in crops], axis=0)  # the bound's noise level (lenses.bound)
     return PlateSpectrum(table=table, aspect=aspect, tail_amplitude=tuple(float(a) for a in amplitude),
-                         tail_exponent=exponent, mean_radiance=tuple(float(m) for m in mean), n_crops=len(crops))
+                         tail_exponent=exponent, mean_radiance=tuple(float(m) for m in mean), n_crops=len(crops),
+                         min_radiance=tuple(float(v) for v in least))
 
 
 def _fit_tail(table: np.ndarray, covered: np.ndarray, nx: int, aspect: float) -> tuple[np.ndarray, float]:
@@ -104,7 +110,7 @@ def _fit_tail(table: np.ndarray, covered: np.ndarray, nx: int, aspect: float) ->
 
 def estimate_plate_spectrum(n_scenes: int = 300, size: tuple[int, int] = (512, 1024), seed: int = 0,
                             min_width_px: int = 16, nx: int = 64) -> PlateSpectrum:
-    """Plate spectrum and operating radiance from the first `n_scenes` synthetic TRAIN scenes.
+    """Plate spectrum, mean and least radiance from the first `n_scenes` synthetic TRAIN scenes.
 
     Only the train split is read, so the bound never looks at the scenes it is compared with.
     """
@@ -116,13 +122,16 @@ def estimate_plate_spectrum(n_scenes: int = 300, size: tuple[int, int] = (512, 1
 def cached_plate_spectrum(cache_dir: Path, n_scenes: int, size: tuple[int, int] = (512, 1024),
                           seed: int = 0) -> PlateSpectrum:
     """`estimate_plate_spectrum`, memoised as JSON in the cache (the estimate reads hundreds of scenes)."""
-    key = config_hash({"what": "plate-spectrum", "n_scenes": n_scenes, "size": size, "seed": seed})
+    # "fields": a new key for the estimate that records min_radiance (older files lack it).
+    key = config_hash({"what": "plate-spectrum", "n_scenes": n_scenes, "size": size, "seed": seed,
+                       "fields": "min_radiance"})
     path = Path(cache_dir) / "bound" / f"plate-spectrum-{key}.json"
     if path.is_file():
         d = json.loads(path.read_text())
         return PlateSpectrum(table=np.asarray(d["table"]), aspect=d["aspect"],
                              tail_amplitude=tuple(d["tail_amplitude"]), tail_exponent=d["tail_exponent"],
-                             mean_radiance=tuple(d["mean_radiance"]), n_crops=d["n_crops"])
+                             mean_radiance=tuple(d["mean_radiance"]), n_crops=d["n_crops"],
+                             min_radiance=tuple(d["min_radiance"]))
     spectrum = estimate_plate_spectrum(n_scenes, size, seed)
     d = dataclasses.asdict(spectrum)
     d["table"] = spectrum.table.tolist()

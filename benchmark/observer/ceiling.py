@@ -141,6 +141,29 @@ class CeilingCurve:
             out[f.name] = value
         return out
 
+    @classmethod
+    def from_dict(cls, d: dict) -> CeilingCurve:
+        """The curve of a `to_dict` dict (None in float arrays back to NaN); errors name a missing field."""
+        missing = [f.name for f in dataclasses.fields(cls) if f.name not in d and f.default is dataclasses.MISSING
+                   and f.default_factory is dataclasses.MISSING]
+        if missing:
+            raise ValueError(f"ceiling curve dict lacks {missing}; it must come from CeilingCurve.to_dict")
+        scalars = {"lens", "frames", "noise_draws", "interval_width", "seconds"}
+        dtypes = {"widths_px": int, "n_plates": int, "converged": bool}  # the other arrays: float, None -> NaN
+        kwargs: dict = {}
+        for f in dataclasses.fields(cls):
+            if f.name not in d:
+                continue
+            value = d[f.name]
+            if f.name == "model":
+                value = PlateModel(**{k: tuple(v) if isinstance(v, list) else v for k, v in value.items()})
+            elif f.name == "pair_positions":
+                value = None if value is None else tuple(value)
+            elif f.name not in scalars and value is not None:
+                value = np.asarray(value, dtype=dtypes.get(f.name, float))
+            kwargs[f.name] = value
+        return cls(**kwargs)
+
 
 def hypothesis_means(camera: Camera, texts: list[str], width_px: int, model: PlateModel) -> torch.Tensor:
     """Mean raw electrons (A, P) of the plate rendered with each text, over the plate +- the PSF radius."""

@@ -4,8 +4,10 @@ For each lens (built from its entry's `lens_spec`, the co-designed coefficients 
 retrained): plate and per-character ceilings at every width of `WIDTHS_PX` for T = 1 and 30 frames,
 the certified widths W_5%, and the seconds it took. For `DEPTH_LENSES` the same curve once more with
 the PSF at each width's own object distance (`lenses.depth.plate_distance_m`), to show whether one
-object plane suffices. Writes leaderboard/studies/ideal_observer.json and its chart
-leaderboard/charts/ideal_observer.png.
+object plane suffices. Each lens's record keeps the lens spec it was computed for (`lens_spec`), so
+the leaderboard shows a ceiling only beside an entry of that very lens (benchmark.observer.published).
+Writes leaderboard/studies/ideal_observer.json and its chart leaderboard/charts/ideal_observer.png
+(benchmark.charts.ideal_observer, re-rendered by `python -m benchmark report` with the readers on it).
 """
 
 from __future__ import annotations
@@ -14,10 +16,6 @@ import json
 import time
 from pathlib import Path
 
-import matplotlib.pyplot as plt
-import numpy as np
-
-from benchmark.charts import save_figure
 from benchmark.observer.ceiling import CeilingCurve, PlateModel, Precision, ceiling_curves, certified_width
 from lenses import Lens, parse_spec
 
@@ -28,18 +26,22 @@ EPS = 0.05
 REPO = Path(__file__).resolve().parents[2]
 
 
-def quick_lenses(entries_dir: Path = REPO / "leaderboard" / "entries") -> dict[str, Lens]:
-    """Every lens of the quick synthetic leaderboard, from its entry's stored spec (name -> Lens)."""
+def quick_lens_specs(entries_dir: Path = REPO / "leaderboard" / "entries") -> dict[str, dict]:
+    """The stored lens spec of every lens of the quick synthetic leaderboard (name -> spec dict)."""
     found = {}
     for path in sorted(entries_dir.glob("*__quick__synthetic.json")):
         entry = json.loads(path.read_text(encoding="utf-8"))
-        spec = entry.get("lens_spec")
-        if spec is None:  # the `sharp` reference has no lens
-            continue
-        found[entry["lens"]] = Lens(parse_spec(spec, source=str(path)))
+        if entry.get("lens_spec") is not None:  # the `sharp` reference has no lens
+            found[entry["lens"]] = entry["lens_spec"]
     if not found:
         raise FileNotFoundError(f"no quick leaderboard entry with a lens_spec under {entries_dir}")
     return found
+
+
+def quick_lenses(entries_dir: Path = REPO / "leaderboard" / "entries") -> dict[str, Lens]:
+    """Every lens of the quick synthetic leaderboard, from its entry's stored spec (name -> Lens)."""
+    return {name: Lens(parse_spec(spec, source=f"{entries_dir}/{name}__quick__synthetic.json"))
+            for name, spec in quick_lens_specs(entries_dir).items()}
 
 
 def summary(curve: CeilingCurve) -> dict:
@@ -57,6 +59,7 @@ def run_study(out_json: Path = REPO / "leaderboard" / "studies" / "ideal_observe
               frames: tuple[int, ...] = FRAMES, depth_lenses: tuple[str, ...] = DEPTH_LENSES, seed: int = 0,
               precision: Precision = Precision(max_plates=40)) -> dict:
     """Compute the study (module docstring) for `names` (default: all quick lenses); write json + png."""
+    specs = quick_lens_specs()
     lenses_by_name = quick_lenses()
     names = names or tuple(lenses_by_name)
     record: dict = {"eps": EPS, "widths_px": list(widths_px), "frames": list(frames), "seed": seed,
@@ -65,7 +68,9 @@ def run_study(out_json: Path = REPO / "leaderboard" / "studies" / "ideal_observe
         lens = lenses_by_name[name]
         t0 = time.perf_counter()
         curves = ceiling_curves(lens, widths_px, frames, seed=seed, precision=precision)
-        entry = {"seconds": time.perf_counter() - t0, **{f"t{c.frames}": summary(c) for c in curves}}
+        # The spec travels with the curve: the leaderboard shows it only for entries of the same lens.
+        entry = {"lens_spec": specs[name], "seconds": time.perf_counter() - t0,
+                 **{f"t{c.frames}": summary(c) for c in curves}}
         if name in depth_lenses:
             t0 = time.perf_counter()
             deep = ceiling_curves(lens, widths_px, frames, seed=seed, precision=precision, at_own_distance=True)
@@ -80,27 +85,7 @@ def run_study(out_json: Path = REPO / "leaderboard" / "studies" / "ideal_observe
 
 
 def write_chart(record: dict, path: Path) -> Path:
-    """Plate ceiling vs width per lens: T = 1 solid, T = 30 dashed, own-distance PSF dotted, 5 % line."""
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True)
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for ax, key, title in zip(axes, ("plate", "char"), ("whole plate (least block: characters, letter pair)", "per character (mean)")):
-        for n, (name, entry) in enumerate(record["lenses"].items()):
-            colour = colours[n % len(colours)]
-            for frames, style in (("t1", "-"), ("t30", "--")):
-                if frames not in entry:
-                    continue
-                curve = entry[frames]["curve"]
-                ax.plot(curve["widths_px"], np.asarray(curve[f"{key}_ceiling"]) * 100, style, color=colour,
-                        label=name if frames == "t1" else None)
-            deep = entry.get("at_own_distance", {}).get("t1")
-            if deep:
-                ax.plot(deep["curve"]["widths_px"], np.asarray(deep["curve"][f"{key}_ceiling"]) * 100, ":",
-                        color=colour)
-        ax.axhline(100 * record["eps"], color="k", lw=0.8)
-        ax.set_xscale("log")
-        ax.set_xlabel("plate width (px)")
-        ax.set_title(f"Ideal-observer ceiling, {title}")
-    axes[0].set_ylabel("ceiling on correct reads (%)")
-    axes[0].legend(fontsize=7, ncol=2, title="solid T=1, dashed T=30, dotted PSF at own distance (T=1)",
-                   title_fontsize=7)
-    return save_figure(fig, path)
+    """The study's chart (benchmark.charts.ideal_observer) with the published entries' readers on it."""
+    from benchmark.charts.ideal_observer import write_ideal_observer_chart
+    from benchmark.leaderboard_entries import load_entries
+    return write_ideal_observer_chart(record, load_entries(path.parent.parent), path)

@@ -26,6 +26,26 @@ def test_content_fixed_in_plate_coordinates_lands_on_one_frequency_at_every_size
     np.testing.assert_allclose(spectrum.mean_radiance, 0.5, atol=1e-6)
 
 
+def test_least_radiance_is_the_darkest_pixel_of_any_crop_per_channel():
+    """The bound's noise level (lenses.bound): the minimum over all crops, each channel on its own."""
+    crops = [cosine_plate(32, 3), cosine_plate(64, 5)]
+    crops[1][2, 7] = (0.11, 0.9, 0.4)  # one dark red pixel in the second crop
+    spectrum = spectrum_from_crops(crops, nx=32)
+    expected = np.min([c.reshape(-1, 3).min(axis=0) for c in crops], axis=0)
+    np.testing.assert_allclose(spectrum.min_radiance, expected)
+    assert spectrum.min_radiance[0] == pytest.approx(0.11)
+    assert spectrum.noise_radiance() == spectrum.min_radiance
+
+
+def test_cached_spectrum_keeps_the_least_radiance(tmp_path, monkeypatch):
+    fake = spectrum_from_crops([cosine_plate(w, 4) for w in (32, 64)], nx=32)
+    monkeypatch.setattr(ps, "estimate_plate_spectrum", lambda n, size, seed: fake)
+    first = ps.cached_plate_spectrum(tmp_path, 3)
+    monkeypatch.setattr(ps, "estimate_plate_spectrum", lambda n, size, seed: pytest.fail("not read from the cache"))
+    again = ps.cached_plate_spectrum(tmp_path, 3)
+    assert again.min_radiance == pytest.approx(first.min_radiance) and again.min_radiance is not None
+
+
 def test_pixel_density_scales_with_plate_width():
     """S_w(f) = w^2 D(w f): variance seen on the sensor grid grows with w up to the content's variance."""
     spectrum = spectrum_from_crops([cosine_plate(w, 6) for w in (32, 64)], nx=32)

@@ -1,0 +1,153 @@
+"""The ideal-observer study on the leaderboard and in a run: columns only for the same lens, and a
+reader above the ceiling reported loudly (README, web page, ERROR log, ceiling_check.json)."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import pytest
+
+from benchmark import leaderboard_report
+from benchmark.leaderboard import publish
+from benchmark.leaderboard_entries import LEADERBOARD, load_entries
+from benchmark.leaderboard_tables import main_table
+from benchmark.observer import published
+from benchmark.observer.ceiling import Precision, ceiling_curve
+from benchmark.observer.study import summary
+from benchmark.profiles import get_profile
+from benchmark.schema import Row
+from lenses import Lens, parse_spec
+
+STUDY = json.loads((LEADERBOARD / "studies" / "ideal_observer.json").read_text())
+DEFOCUS_SPEC = STUDY["lenses"]["defocus"]["lens_spec"]
+
+
+def reader_row(lens: str, attack: str, accuracy: float, n_plates: int, seed: int = 0) -> Row:
+    return Row(kind="reader", attack=attack, reader=attack, threat_model="lens-access", lens=lens, seed=seed,
+               profile="quick", scenes="synthetic", metrics={"plate_acc": accuracy, "n_plates": float(n_plates)})
+
+
+def board(tmp_path: Path, spec: dict, accuracy: float, lens: str = "defocus", study: dict = STUDY) -> Path:
+    """A leaderboard folder with `study` and one entry of `lens` (given spec) whose reader reads `accuracy`
+    of 300 plates (two seeds)."""
+    (tmp_path / "entries").mkdir()
+    (tmp_path / "studies").mkdir()
+    (tmp_path / "studies" / "ideal_observer.json").write_text(json.dumps(study))
+    rows = [Row(kind="utility", attack="utility", lens=lens, seed=0, profile="quick", scenes="synthetic",
+                metrics={"miou": 0.2}),
+            reader_row(lens, "answer-key", accuracy, 200), reader_row(lens, "answer-key", accuracy, 100, 1)]
+    publish(rows, get_profile("quick").to_dict(), {lens: {"spec": spec, "coefficients_um": [0.0] * 6}}, tmp_path)
+    return tmp_path
+
+
+@pytest.fixture(scope="module")
+def near_focus() -> tuple[dict, dict]:
+    """A lens focused at 0.5 m (an 87 px PSF) and a study holding its computed ceiling at 32 and 48 px,
+    well below 100 % (every readable plate of the quick lenses is legible to the ideal observer, so a
+    lens this blurred is needed for a ceiling a reader of readable plates can beat)."""
+    spec = json.loads(json.dumps(DEFOCUS_SPEC))
+    spec["name"], spec["optics"]["focus_distance_m"] = "near-focus", 0.5
+    coarse = Precision(interval_width=0.1, coarse_width=0.2, min_plates=4, batch=4, max_plates=8)
+    curve = ceiling_curve(Lens(parse_spec(spec, source="test")), (32, 48), frames=1, precision=coarse, pair=None)
+    study = {**STUDY, "lenses": {"near-focus": {"lens_spec": spec, "t1": summary(curve)}}}
+    return spec, study
+
+
+def test_a_reader_above_the_ceiling_is_reported_in_the_readme_the_page_and_the_log(tmp_path, caplog, near_focus):
+    spec, study = near_focus
+    assert study["lenses"]["near-focus"]["t1"]["curve"]["plate_interval"][-1][1] < 0.9
+    directory = board(tmp_path, spec, 1.0, "near-focus", study)
+    with caplog.at_level(logging.ERROR):
+        leaderboard_report.render(directory)
+    readme = (directory / "README.md").read_text()
+    section = readme.split("## Ceiling violations", 1)[1].split("## ", 1)[0]
+    assert "1 reader(s) beat the ideal observer's ceiling" in section and "answer-key" in section
+    assert "| near-focus | quick | synthetic | answer-key | 100.0 |" in section
+    page = (directory / "index.html").read_text()
+    assert "Ceiling violations" in page and 'class="violation"' in page and "answer-key" in page
+    assert any("CEILING VIOLATION" in r.message and "answer-key" in r.message and r.levelno == logging.ERROR
+               for r in caplog.records)
+    # The T = 30 column of a study without T = 30 reads "not computed"; the others show the study.
+    line = next(x for x in readme.splitlines() if x.startswith("| near-focus | quick"))
+    assert line.count("not computed") == 1
+
+
+def test_a_reader_below_the_ceiling_passes(tmp_path, caplog, near_focus):
+    spec, study = near_focus
+    with caplog.at_level(logging.ERROR):
+        leaderboard_report.render(board(tmp_path, spec, 0.3, "near-focus", study))
+    assert not [r for r in caplog.records if "CEILING VIOLATION" in r.message]
+
+
+def test_an_honest_reader_passes_and_the_columns_show_the_study(tmp_path, caplog):
+    directory = board(tmp_path, DEFOCUS_SPEC, 0.0)
+    with caplog.at_level(logging.ERROR):
+        leaderboard_report.render(directory)
+    assert not [r for r in caplog.records if "CEILING VIOLATION" in r.message]
+    readme = (directory / "README.md").read_text()
+    assert "None: every reader" in readme.split("## Ceiling violations", 1)[1]
+    t1 = STUDY["lenses"]["defocus"]["t1"]
+    line = next(x for x in readme.splitlines() if x.startswith("| defocus | quick"))
+    expected = f"| {100 * t1['plate_ceiling_w32']:.1f} | {t1['w5_plate_px']} | {STUDY['lenses']['defocus']['t30']['w5_plate_px']} |"
+    assert expected in line
+
+
+def test_another_spec_of_the_same_name_is_not_computed_and_not_checked(tmp_path, caplog):
+    """A retrained lens keeps its name; the study's ceiling is of the old coefficients: not shown, not checked."""
+    changed = json.loads(json.dumps(DEFOCUS_SPEC))
+    changed["mask"]["zernike_um"][3] = 0.25
+    directory = board(tmp_path, changed, 1.0)
+    with caplog.at_level(logging.ERROR):
+        leaderboard_report.render(directory)
+    assert not [r for r in caplog.records if "CEILING VIOLATION" in r.message]
+    table = main_table(load_entries(directory), published.load_study(directory))
+    line = next(x for x in table.splitlines() if x.startswith("| defocus"))
+    assert line.count("not computed") == 3
+
+
+def test_specs_compare_by_value_not_description():
+    same = {**DEFOCUS_SPEC, "description": "reworded"}
+    assert published.same_lens(DEFOCUS_SPEC, same)
+    nudged = json.loads(json.dumps(DEFOCUS_SPEC))
+    nudged["optics"]["focus_distance_m"] += 1e-3
+    assert not published.same_lens(DEFOCUS_SPEC, nudged)
+    assert not published.same_lens(None, DEFOCUS_SPEC)
+
+
+def test_a_run_writes_its_check_per_width_bin(tmp_path, caplog, near_focus):
+    """Per-plate records of a run: the 32-48 px bin of near-focus read perfectly trips; ideal (ceiling
+    100 %) passes; a lens the study lacks is named as not checked."""
+    spec, study = near_focus
+    (tmp_path / "studies").mkdir()
+    both = {**study, "lenses": {**study["lenses"], "ideal": STUDY["lenses"]["ideal"]}}
+    (tmp_path / "studies" / "ideal_observer.json").write_text(json.dumps(both))
+    records = ([{"lens": "near-focus", "attack": "answer-key", "width_px": 33 + i % 10, "correct": "True"}
+                for i in range(100)]
+               + [{"lens": "ideal", "attack": "answer-key", "width_px": 40, "correct": True} for _ in range(400)]
+               + [{"lens": "os-d-1", "attack": "answer-key", "width_px": 40, "correct": True} for _ in range(50)])
+    info = {"near-focus": {"spec": spec}, "ideal": {"spec": STUDY["lenses"]["ideal"]["lens_spec"]},
+            "os-d-1": {"spec": {}}}
+    out = tmp_path / "run"
+    out.mkdir()
+    with caplog.at_level(logging.ERROR):
+        path = published.write_run_check(out, records, info, tmp_path)
+    check = json.loads(path.read_text())
+    assert path == out / "ceiling_check.json"
+    assert check["checked"] == ["ideal", "near-focus"] and "os-d-1" in check["not_checked"]
+    assert [(v["lens"], v["low_px"], v["high_px"]) for v in check["violations"]] == [("near-focus", 32, 48)]
+    assert check["violations"][0]["ceiling_high"] < 0.9
+    assert any("CEILING VIOLATION" in r.message for r in caplog.records)
+
+
+def test_entry_accuracy_pools_seeds_with_a_wilson_interval():
+    from scipy.stats import binomtest
+    (entry,) = [e for e in load_entries(LEADERBOARD) if e.lens == "gp" and e.profile == "quick"]
+    chain = next(c for c in entry.chains() if c.attack == "wiener-known-psf>lpdr-oracle")
+    hits = sum(round(r.metrics["plate_acc"] * r.metrics["n_plates"]) for r in chain.rows)
+    n = sum(int(r.metrics["n_plates"]) for r in chain.rows)
+    (m,) = [m for m in published.entry_accuracies(entry) if m.reader == chain.attack]
+    ci = binomtest(hits, n).proportion_ci(0.95, method="wilson")
+    assert m.n_plates == n and m.accuracy == pytest.approx(hits / n)
+    assert m.interval == pytest.approx((ci.low, ci.high), abs=1e-9)
