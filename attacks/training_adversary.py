@@ -1,7 +1,7 @@
 """``training-adversary``: the RED10 deblurring adversary from the lens's own co-design run.
 
 The paper's first deblurring attack (Table 2, "Adversarial training"): the network that was
-trained jointly with the lens to restore its sensor images. Contract with ``lenses.codesign``:
+trained jointly with the lens to restore its sensor images. Contract with ``benchmark.codesign``:
 a co-designed lens carries the attribute ``adversary``, a ``torch.nn.Module`` mapping sensor
 images (B, 3, H, W) in [0, 1] to scene estimates; fixed lenses have none, and the attacker is
 skipped for them (``skip_reason``).

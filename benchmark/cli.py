@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
-import json
 import logging
 import os
-import shutil
+import json
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -52,7 +50,11 @@ def _device(text: str) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     from benchmark.profiles import PROFILES
+    from lenses.mask_export import FORMATS as MASK_FORMATS
     parser = argparse.ArgumentParser(prog="python -m benchmark", description=__doc__)
+    loudness = parser.add_mutually_exclusive_group()
+    loudness.add_argument("-v", "--verbose", action="store_true", help="log debug messages too")
+    loudness.add_argument("-q", "--quiet", action="store_true", help="log warnings and errors only")
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="push scenes through lenses, attack the sensor images, write a table")
     run.add_argument("--lens", action="append", required=True, metavar="NAME|SPEC.toml",
@@ -75,15 +77,39 @@ def build_parser() -> argparse.ArgumentParser:
                           "a step past it gives a failed row with a clear message (default: none)")
     run.add_argument("--frames", type=int, default=30, metavar="T",
                      help="frames of a static plate for the video bound (default 30; T = 1 is always reported)")
+    run.add_argument("--dry-run", action="store_true",
+                     help="print the task plan (cached or to compute, measured cost per task) and compute nothing")
     train = sub.add_parser("train", help="train (or load) a co-designed lens; under torchrun, data-parallel over the ranks")
     train.add_argument("--lens", required=True, choices=_codesign_lenses(), help="co-design scheme registered as a lens")
     train.add_argument("--profile", default="quick", choices=list(PROFILES), help="run size (default: quick)")
     train.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     train.add_argument("--device", type=_device, default="cpu",
                        help="cpu (default; gloo under torchrun) or cuda (NCCL under torchrun, one GPU per rank)")
+    pre = sub.add_parser("pretrain", help="pre-train the clean utility net to its plateau; export weights + provenance")
+    pre.add_argument("--profile", default="quick", choices=list(PROFILES), help="recipe and val set (default: quick)")
+    pre.add_argument("--seed", type=int, default=0, help="training seed, and the seed of the val scenes (default 0)")
+    pre.add_argument("--out", type=Path, default=None,
+                     help="weights folder (default: the package's benchmark/utility/weights)")
+    pre.add_argument("--dir", type=Path, default=None,
+                     help="leaderboard folder for the study and chart (default: the repository's)")
+    pre.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
     sub.add_parser("list", help="list registered lenses, attackers and scene sets")
     rep = sub.add_parser("report", help="render leaderboard/README.md and charts from leaderboard/entries/")
     rep.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
+    rep.add_argument("--migrate", action="store_true",
+                     help="first rewrite stored entries of an older format in the current one "
+                          "(leaderboard_entries.ENTRY_VERSION)")
+    mask = sub.add_parser("export-mask", help="write a lens's phase mask as a height map (um) a fab or Zemax can read")
+    mask.add_argument("lens", metavar="LENS",
+                      help="registered lens name, a .toml spec, or a leaderboard entry .json (its published mask)")
+    mask.add_argument("--format", required=True, choices=list(MASK_FORMATS), dest="fmt",
+                      help="npy (float64), tiff (32-bit float), zemax-gridsag (OpticStudio Grid Sag .DAT, mm), "
+                           "csv (x_mm, y_mm, height_um); metadata in PATH.json beside it")
+    mask.add_argument("--out", type=Path, required=True, metavar="PATH", help="file to write")
+    mask.add_argument("--samples", type=int, default=257, help="grid nodes per side across the aperture (default 257)")
+    mask.add_argument("--profile", default="quick", choices=list(PROFILES),
+                      help="a co-designed lens's training profile (default: quick)")
+    mask.add_argument("--seed", type=int, default=0, help="a co-designed lens's training seed (default 0)")
     study = sub.add_parser("study", help="measure a modelling-choice study into leaderboard/studies/ and re-render")
     study.add_argument("name", choices=["psf-grid", "utility-size"],
                        help="psf-grid: PSF support, pupil grid, oversampling vs error and time; "
@@ -94,17 +120,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _codesign_lenses() -> list[str]:
-    from lenses.codesign.schemes import SCHEMES
+    from benchmark.codesign.schemes import SCHEMES
     return [name for name, scheme in SCHEMES.items() if scheme.optics]  # "fixed" is no registered lens
 
 
 def cmd_train(args: argparse.Namespace) -> int:
     from benchmark.cache import cache_root
     from benchmark.profiles import get_profile
-    from lenses.codesign.builtin import START_SPEC
-    from lenses.codesign.distributed import session
-    from lenses.codesign.schemes import SCHEMES
-    from lenses.codesign.trainer import CoDesign
+    from benchmark.codesign.builtin import START_SPEC
+    from benchmark.codesign.distributed import session
+    from benchmark.codesign.schemes import SCHEMES
+    from benchmark.codesign.trainer import CoDesign
     from lenses.spec import load_spec
 
     with session(args.device) as (replicas, device):
@@ -136,79 +162,27 @@ def cmd_list() -> int:
     return 0
 
 
-def prepare_out(path: Path | None) -> tuple[Path, bool]:
-    """The output folder (default runs/<date-time>), created and checked writable before any
-    compute; and whether it was created now (so a run that fails early can remove it again)."""
-    out = path or Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {str(out)!r} is a file; give a folder (it is created if missing)")
-    created = not out.exists()
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out):
-            pass
-    except OSError as exc:
-        raise ValueError(f"--out {str(out)!r} is not a writable folder ({exc.strerror or exc})") from None
-    return out, created
-
-
 def cmd_run(args: argparse.Namespace) -> int:
-    import lenses
-    from benchmark import executors, runner
+    from benchmark import api
     from benchmark.profiles import get_profile
-    from benchmark.provenance import git_commit
-    from benchmark.run_config import RunConfig
-    from benchmark.scenes import PLATE_FORMAT, load_scenes, plate_entropy_bits
 
-    git_commit()  # pinned now, as the code was imported: later commits do not re-stamp this run
-
-    # Every check that can fail runs before the output folder exists and before any compute.
-    profile = get_profile(args.profile)
-    known = lenses.available()
-    for name in args.lens:  # fail before any work on a typo or a bad spec field
-        if name.endswith(".toml") or Path(name).is_file():
-            lenses.load_spec(name)
-        elif name not in known:
-            lenses.load(name)
-    load_scenes(args.scenes, "val", 0, profile.image_size, 0)  # validates the scene set name
-    plate_format = args.plate_format or PLATE_FORMAT
-    plate_entropy_bits(plate_format)  # validates the format before any work
-    if args.frames < 1:
-        raise ValueError(f"--frames must be >= 1, got {args.frames}")
-    executors.get(args.executor)  # fails fast on a bad name or a missing Ray
-    selection = runner.select_attackers(args.attack)
-    cfg = RunConfig(lenses=args.lens, attacks=args.attack, scenes=args.scenes, profile=profile,
-                    seeds=args.seeds, device=args.device, plate_format=plate_format, frames=args.frames,
-                    budget_s=args.budget_s)
-    out, created = prepare_out(args.out)
-    print(f"profile {profile.name}: {json.dumps(profile.to_dict())}")
-    try:
-        t0 = time.perf_counter()
-        result = runner.run(cfg, executor=args.executor, selection=selection)
-    except BaseException:
-        if created and not any(out.iterdir()):
-            out.rmdir()
-        raise
-    meta = {"command": sys.argv, "profile": profile.to_dict(), "executor": args.executor,
-            "wall_s": time.perf_counter() - t0}
-    write_run_outputs(out, result, meta)
-    if args.publish:
-        publish_run(result, profile, out)
-    print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({meta['wall_s']:.1f} s)")
-    return report_failures(result.failed)
-
-
-def write_run_outputs(out: Path, result, meta: dict) -> None:
-    """results.json (schema rows + their settings), tables, pictures and charts of a run."""
-    from benchmark import report
-    from benchmark.schema import Results, ok_rows, write_results
-    write_results(out / "results.json", Results(result.rows, result.settings, meta))
-    for picture in result.pictures:
-        shutil.copyfile(picture, out / picture.name)
-    flat = [r.flat() for r in ok_rows(result.rows)]
-    write_charts(out, flat, result.plates, result.bound_curves)
-    report.write_tables(out, flat)
+    options = dict(lenses=args.lens, attacks=args.attack, profile=args.profile, seeds=args.seeds,
+                   scenes=args.scenes, device=args.device, executor=args.executor,
+                   plate_format=args.plate_format, frames=args.frames, budget_s=args.budget_s)
+    if args.dry_run:
+        print(api.plan(**options).render())
+        return 0
+    out = args.out or Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    results = api.run(**options, out=out, meta={"command": sys.argv})
     print((out / "table.md").read_text())
+    if args.publish:
+        from benchmark import leaderboard
+        output = results.output
+        paths = leaderboard.publish_run(output.rows, get_profile(args.profile).to_dict(), output.lens_info, out,
+                                        settings=output.settings)
+        print(f"published {len(paths)} leaderboard entries; rendered the leaderboard")
+    print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({results.meta['wall_s']:.1f} s)")
+    return report_failures(results.failed)
 
 
 def report_failures(failed: list) -> int:
@@ -224,70 +198,29 @@ def report_failures(failed: list) -> int:
     return 1
 
 
-def write_charts(out: Path, rows: list[dict], plates: list[dict], bound_curves: dict[str, tuple]) -> None:
-    """The run's charts: restorer speed vs PSNR, plate accuracy vs width (with the bound), the bound."""
-    from benchmark import report
-    from benchmark.charts.bound import write_bound_chart
-    from benchmark.charts.plates import write_plate_width_chart
-    from benchmark.charts.restorers import restorer_points, write_restorer_speed_chart
-    if restorer_points(rows):
-        write_restorer_speed_chart(rows, out / "restorers_speed_vs_psnr.png")
-    if plates:
-        report.write_plate_records(out, plates)
-        write_plate_width_chart(plates, out / "plate_accuracy_vs_width.png", ceilings=bound_curves)
-    if bound_curves:
-        write_bound_chart(bound_curves, out / "bound_ceiling_vs_width.png")
-
-
-def publish_run(result, profile, out: Path) -> None:
-    from benchmark import leaderboard, leaderboard_report
-    from benchmark.schema import ok_rows
-    # The leaderboard reads version-1 rows until it reads the schema (config_hash = settings hash).
-    rows = [{**r.flat(), "config_hash": r.settings_hash} for r in ok_rows(result.rows)]
-    lens_info = result.lens_info
-    paths = leaderboard.publish(rows, profile.to_dict(), lens_info)
-    samples = leaderboard.LEADERBOARD / "samples"
-    samples.mkdir(parents=True, exist_ok=True)
-    copy_run_pictures(out, list(lens_info), profile.name, samples)
-    leaderboard_report.render()
-    leaderboard_report.update_readme(leaderboard.LEADERBOARD.parent / "README.md")
-    print(f"published {len(paths)} leaderboard entries; rendered {leaderboard.LEADERBOARD / 'README.md'}")
-
-
-def copy_run_pictures(out: Path, lens_names: list[str], profile: str, samples: Path) -> list[Path]:
-    """Copy a published run's pictures into the leaderboard: each lens's first sample grid, and the
-    run's plate-accuracy-vs-width chart (named after the run's lenses: one chart per published run)."""
-    copied = []
-    for name in lens_names:
-        first = sorted(out.glob(f"samples_{name}_seed*.png"))
-        if first:
-            copied.append(Path(shutil.copyfile(first[0], samples / f"{name}__{profile}.png")))
-    chart = out / "plate_accuracy_vs_width.png"
-    if chart.is_file():
-        copied.append(Path(shutil.copyfile(chart, samples / f"plate_width__{profile}__{'+'.join(lens_names)}.png")))
-    return copied
-
-
 def cmd_report(args: argparse.Namespace) -> int:
-    from benchmark import leaderboard, leaderboard_report
-    directory = args.dir or leaderboard.LEADERBOARD
+    from benchmark import leaderboard_entries, leaderboard_report
+    directory = args.dir or leaderboard_entries.LEADERBOARD
     if not (directory / "entries").is_dir():
         raise ValueError(f"no leaderboard entries in {directory / 'entries'}; publish some with "
                          "`python -m benchmark run --lens NAME --publish`")
+    if args.migrate:
+        for path in leaderboard_entries.migrate_directory(directory):
+            print(f"migrated {path} to entry format {leaderboard_entries.ENTRY_VERSION}")
     for path in leaderboard_report.render(directory):
         print(f"wrote {path}")
-    if args.dir is None and leaderboard_report.update_readme(leaderboard.LEADERBOARD.parent / "README.md"):
+    if args.dir is None and leaderboard_report.update_readme(leaderboard_entries.LEADERBOARD.parent / "README.md"):
         print("updated the results table of README.md")
     return 0
 
 
 def cmd_study(args: argparse.Namespace) -> int:
-    from benchmark import leaderboard, leaderboard_report
+    from benchmark import leaderboard_entries, leaderboard_report
     from benchmark.profiles import get_profile
     from benchmark.sensing import to_tensor
     from benchmark.scenes.loading import load_scene
     from benchmark.studies import psf_grid, utility_size
-    directory = args.dir or leaderboard.LEADERBOARD
+    directory = args.dir or leaderboard_entries.LEADERBOARD
     t0 = time.perf_counter()
     if args.name == "psf-grid":
         scene = to_tensor([load_scene("synthetic", "val", 0, (256, 512), 0)])
@@ -300,14 +233,49 @@ def cmd_study(args: argparse.Namespace) -> int:
     return 0
 
 
+def mask_spec(name: str, profile: str, seed: int):
+    """The LensSpec behind `name`: a leaderboard entry .json (its published lens spec), a .toml
+    spec, or a registered lens (a co-designed one is trained, or taken from the cache, for
+    `profile` and `seed`) with its current coefficients."""
+    import lenses
+    from benchmark.profiles import get_profile
+    if name.endswith(".json"):
+        path = Path(name)
+        if not path.is_file():
+            raise FileNotFoundError(f"leaderboard entry {name!r} does not exist")
+        spec = json.loads(path.read_text()).get("lens_spec")
+        if not spec:
+            raise ValueError(f"{name}: the entry stores no lens_spec to export")
+        return lenses.parse_spec(spec, source=name)
+    return lenses.load(name, profile=get_profile(profile), seed=seed).current_spec()
+
+
+def cmd_export_mask(args: argparse.Namespace) -> int:
+    from lenses.mask_export import height_map, write_height_map
+    spec = mask_spec(args.lens, args.profile, args.seed)
+    heights = height_map(spec, args.samples)
+    written = write_height_map(heights, args.out, args.fmt)
+    meta = heights.metadata
+    print(f"{spec.name}: {args.samples} x {args.samples} nodes over {meta['aperture_diameter_mm']} mm "
+          f"({meta['grid']['spacing_um']:.3f} um apart), peak-to-valley {meta['peak_to_valley_um']:.4f} um of "
+          f"{meta['material']}; wrote {', '.join(str(p) for p in written)}")
+    return 0
+
+
+def cmd_pretrain(args: argparse.Namespace) -> int:
+    from benchmark.utility.pretrain import main as pretrain_main
+    return pretrain_main(args=args)
+
+
 def main(argv: list[str] | None = None) -> int:
     from lenses.registry import DuplicateNameError
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     args = build_parser().parse_args(argv)
+    level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", force=True)
+    commands = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "train": cmd_train, "study": cmd_study,
+                "export-mask": cmd_export_mask, "pretrain": cmd_pretrain}
     try:
-        return {"list": cmd_list, "run": cmd_run, "report": cmd_report, "train": cmd_train,
-                "study": cmd_study}[args.command](*(
-            () if args.command == "list" else (args,)))
+        return commands[args.command](*(() if args.command == "list" else (args,)))
     except (ValueError, LookupError, NotImplementedError, FileNotFoundError, DuplicateNameError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

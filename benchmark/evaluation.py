@@ -20,7 +20,7 @@ import attacks
 from benchmark.budget import time_budget
 from benchmark.intervals import plate_intervals, scene_intervals
 from benchmark.metrics import psnr, ssim
-from benchmark.plates import PlateOutcome, score_scene, summarise
+from benchmark.plate_scoring import PlateOutcome, score_scene, summarise
 from benchmark.rows import RowBuilder
 from benchmark.run_config import RunConfig
 from benchmark.scenes import Scene

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from benchmark import stats
-from benchmark.plates import PlateOutcome
+from benchmark.plate_scoring import PlateOutcome
 from benchmark.schema import Row
 from benchmark.utility.scoring import scores
 

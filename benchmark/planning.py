@@ -22,10 +22,20 @@ TASK_VERSION = 2
 
 @dataclass(frozen=True)
 class AttackerRef:
-    """An attacker of the run: its name (what rows and keys use) and how to load it (`attacks.load`)."""
+    """An attacker of the run: its name (what rows and keys use) and how to load it
+    (`benchmark.attacker_objects.load`: a registered name, a file spec, or an object's spec).
+
+    `settings_key` is set for attackers given as Python objects (`benchmark.run`): a hash of their
+    `describe()` and source, so that the run's cache tells two instances' options apart."""
 
     name: str
     spec: str
+    settings_key: str = ""
+
+    @property
+    def identity(self) -> str:
+        """What keys the run's cache: the name, and the settings key of an attacker given as an object."""
+        return f"{self.name}@{self.settings_key}" if self.settings_key else self.name
 
 
 @dataclass(frozen=True)
@@ -67,7 +77,7 @@ def fit_task(seed: int, lens: str, restorer: AttackerRef, deps: tuple[str, ...] 
 def run_directory(cfg: RunConfig, restorers: list[AttackerRef], readers: list[AttackerRef]) -> Path:
     """Where a run's task results live: one folder per (configuration, code version)."""
     key = config_hash({"version": TASK_VERSION, "commit": git_commit(), "lenses": cfg.lenses,
-                       "restorers": [r.name for r in restorers], "readers": [r.name for r in readers],
+                       "restorers": [r.identity for r in restorers], "readers": [r.identity for r in readers],
                        "scenes": cfg.scenes, "profile": cfg.profile.to_dict(), "seeds": cfg.seeds,
                        "device": cfg.device, "plate_format": cfg.plate_format, "frames": cfg.frames})
     return Path(cfg.cache_dir) / "tasks" / key

@@ -18,10 +18,16 @@ class Profile:
     n_train: int                  # training scenes (co-design, attackers that fit)
     train_crop: tuple[int, int]   # (h, w) random crops for training
     batch_size: int
-    # Co-design (lenses/codesign)
+    # Co-design (benchmark/codesign)
     utility_model: str            # SegFormer variant (benchmark.utility.segformer)
     adversary_width: int          # RED10 width
-    pretrain_steps: int           # clean utility pre-training, shared by all lenses
+    pretrain_steps: int           # clean utility pre-training, shared by all lenses (benchmark.utility.pretrain)
+    pretrain_scenes: int          # distinct training scenes of the clean pre-training
+    pretrain_crop: tuple[int, int]  # (h, w) crops of the clean pre-training
+    pretrain_batch: int           # crops per step of the clean pre-training
+    pretrain_lr: float            # peak AdamW learning rate (linear warmup, then cosine to 1 % of it)
+    pretrain_warmup: int          # warmup steps
+    pretrain_eval_every: int      # steps between learning-curve points (sharp val mIoU)
     codesign_steps: int           # co-design steps per lens
     optics_lr: float              # Adam on the Zernike coefficients (um)
     seg_lr: float                 # AdamW on the utility net
@@ -45,18 +51,24 @@ PROFILES: dict[str, Profile] = {
         Profile("smoke", "whole run under a minute on 2 CPU cores; for tests",
                 image_size=(128, 256), n_val=4, n_train=8, train_crop=(64, 64), batch_size=4,
                 utility_model="tiny", adversary_width=8, pretrain_steps=4, codesign_steps=4,
+                pretrain_scenes=8, pretrain_crop=(64, 64), pretrain_batch=4, pretrain_lr=6e-4, pretrain_warmup=1,
+                pretrain_eval_every=4,
                 optics_lr=2e-2, seg_lr=6e-4, deb_lr=1e-3, bound_scenes=30,
                 restorer_steps=40, nafnet_width=8, nafnet_enc_blocks=(1, 1), nafnet_middle_blocks=1,
                 nafnet_dec_blocks=(1, 1)),
         Profile("quick", "the CPU default: a co-designed lens in under 10 minutes on 2 cores",
                 image_size=(512, 1024), n_val=8, n_train=64, train_crop=(128, 128), batch_size=8,
-                utility_model="b0", adversary_width=32, pretrain_steps=300, codesign_steps=200,
+                utility_model="b0", adversary_width=32, pretrain_steps=1800, codesign_steps=200,
+                pretrain_scenes=256, pretrain_crop=(128, 128), pretrain_batch=8, pretrain_lr=1e-3,
+                pretrain_warmup=90, pretrain_eval_every=180,
                 optics_lr=2e-2, seg_lr=6e-4, deb_lr=1e-3, bound_scenes=300,
                 restorer_steps=400, nafnet_width=16, nafnet_enc_blocks=(1, 1, 2), nafnet_middle_blocks=2,
                 nafnet_dec_blocks=(1, 1, 1)),
         Profile("paper", "the paper's settings, for a GPU: full-size scenes, 512x512 crops, batch 16, 200 epochs",
                 image_size=(1024, 2048), n_val=500, n_train=2975, train_crop=(512, 512), batch_size=16,
                 utility_model="b0", adversary_width=64, pretrain_steps=40000, codesign_steps=200 * 186,
+                pretrain_scenes=2975, pretrain_crop=(512, 512), pretrain_batch=16, pretrain_lr=6e-4,
+                pretrain_warmup=1500, pretrain_eval_every=2000,
                 optics_lr=1e-3, seg_lr=6e-5, deb_lr=1e-3, bound_scenes=300,
                 restorer_steps=100000, nafnet_width=32, nafnet_enc_blocks=(1, 1, 1, 28), nafnet_middle_blocks=1,
                 nafnet_dec_blocks=(1, 1, 1, 1)),

@@ -1,34 +1,30 @@
-"""Run outputs: results.json, table.md, table.csv and the sample-image grid per lens."""
+"""A run's tables: table.csv (every row) and table.md (the seed summary by row kind), from typed rows."""
 
 from __future__ import annotations
 
-import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
-import matplotlib
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
+from benchmark.cache import atomic_write_text
+from benchmark.schema import Row
 
-from benchmark.cache import atomic_write_text  # noqa: E402
-from benchmark.charts import save_figure  # noqa: E402
-
-SCHEMA_VERSION = 1
 ID_COLUMNS = ["lens", "attack", "profile", "scenes"]
-METRIC_COLUMNS = ["threat_model", "miou", "mean_acc", "overall_acc", "psnr_db", "ssim", "plate_acc", "plate_cer",
-                  "plate_det", "n_plates", "bound_bits_w32_t1", "bound_ceiling_w32_t1", "bound_width_eps_t1",
-                  "psf_size_px", "psf_energy", "fit_s", "images_per_s"]
-
-
-def write_results(out: Path, rows: list[dict], meta: dict) -> Path:
-    """results.json: {"schema_version", "meta" (profile values, command), "rows": [flat rows]}."""
-    path = Path(out) / "results.json"
-    atomic_write_text(path, json.dumps({"schema_version": SCHEMA_VERSION, "meta": meta, "rows": rows},
-                                       indent=1, default=str, allow_nan=True))
-    return path
+# table.md is split by row kind, each section with the columns that kind has; a section keeps
+# only rows that have its first measured column (e.g. a reader on scenes without a readable plate).
+SECTIONS = (
+    ("Utility (segmentation of the sensor image)", ("utility",),
+     ["miou", "mean_acc", "overall_acc", "fit_s", "images_per_s"]),
+    ("Restorers (deblurring attacks)", ("restorer",), ["threat_model", "psnr_db", "ssim", "fit_s", "images_per_s"]),
+    ("Plate readers (on the sensor image and after each restorer)", ("reader", "chain"),
+     ["threat_model", "plate_acc", "plate_cer", "plate_det", "n_plates", "images_per_s"]),
+    ("References", ("reference",), ["threat_model", "psnr_db", "ssim", "plate_acc", "images_per_s"]),
+    ("Attack-independent bound", ("bound",),
+     ["bound_bits_w32_t1", "bound_ceiling_w32_t1", "bound_width_eps_t1", "fit_s"]),
+    ("Lenses", ("lens",), ["psf_size_px", "psf_energy", "fit_s", "images_per_s"]),
+)
 
 
 def write_plate_records(out: Path, records: list[dict]) -> Path:
@@ -38,18 +34,19 @@ def write_plate_records(out: Path, records: list[dict]) -> Path:
     return path
 
 
-def summary_table(rows: list[dict]) -> pd.DataFrame:
-    """One line per (lens, attack, profile, scenes): metric means and, with several seeds, stds."""
-    df = pd.DataFrame(rows)
-    metrics = [c for c in METRIC_COLUMNS if c in df.columns and c != "threat_model"]
+def summary_table(rows: Sequence[Row]) -> pd.DataFrame:
+    """One line per (lens, attack, profile, scenes) of the rows that succeeded: the kind, seeds,
+    threat model, metric means and, with several seeds, stds (``NAME_std``)."""
+    df = pd.DataFrame([r.flat() for r in rows if r.ok])
+    metrics = sorted({name for r in rows if r.ok for name in r.metrics})
     group = df.groupby(ID_COLUMNS, sort=False)
     table = group[metrics].mean()
     seeds = group["seed"].nunique()
     if int(seeds.max()) > 1:
         table = table.join(group[metrics].std(ddof=1).add_suffix("_std"))
-    if "threat_model" in df.columns:
-        table.insert(0, "threat_model", group["threat_model"].first())
+    table.insert(0, "threat_model", group["threat_model"].first())
     table.insert(0, "seeds", seeds)
+    table.insert(0, "kind", group["kind"].first())
     return table.reset_index().dropna(axis=1, how="all")
 
 
@@ -76,66 +73,41 @@ def markdown_table(table: pd.DataFrame) -> str:
     return shown.to_markdown(index=False)
 
 
-# table.md is split by row kind, each with the columns that kind has.
-SECTIONS = (
-    ("Utility (segmentation of the sensor image)", lambda a: a == "utility",
-     ["miou", "mean_acc", "overall_acc", "fit_s", "images_per_s"]),
-    ("Restorers (deblurring attacks)", lambda a: a not in ("lens", "utility", "bound") and ">" not in a,
-     ["threat_model", "psnr_db", "ssim", "fit_s", "images_per_s"]),
-    ("Plate readers (on the sensor image and after each restorer)", lambda a: True,
-     ["threat_model", "plate_acc", "plate_cer", "plate_det", "n_plates", "images_per_s"]),
-    ("Attack-independent bound", lambda a: a == "bound",
-     ["bound_bits_w32_t1", "bound_ceiling_w32_t1", "bound_width_eps_t1", "fit_s"]),
-    ("Lenses", lambda a: a == "lens", ["psf_size_px", "psf_energy", "fit_s", "images_per_s"]),
-)
+def failures_markdown(rows: Sequence[Row]) -> str:
+    """The failed rows (attacker, stage, message), or "" when every row succeeded."""
+    failed = [r for r in rows if not r.ok and r.error is not None]
+    if not failed:
+        return ""
+    lines = ["| lens | attack | seed | attacker | stage | error |", "|---|---|---|---|---|---|"]
+    lines += [f"| {r.lens} | {r.attack} | {r.seed} | {r.error.attacker} | {r.error.stage} | "
+              f"{r.error.message.replace('|', '/').splitlines()[0] if r.error.message else ''} |" for r in failed]
+    return "\n".join(lines)
 
 
-def sectioned_markdown(table: pd.DataFrame) -> str:
+def sectioned_markdown(rows: Sequence[Row]) -> str:
+    """table.md: one section per row kind (SECTIONS), then the failed attackers."""
+    table = summary_table(rows) if any(r.ok for r in rows) else pd.DataFrame(columns=["kind"])
     parts = []
-    for title, wanted, columns in SECTIONS:
-        rows = table[table["attack"].map(wanted)]
-        if "plate" in columns[1]:
-            rows = rows[rows["plate_acc"].notna()] if "plate_acc" in rows else rows.iloc[0:0]
-        elif "psnr_db" in columns:
-            rows = rows[rows["psnr_db"].notna()] if "psnr_db" in rows else rows.iloc[0:0]
-        if rows.empty:
+    for title, kinds, columns in SECTIONS:
+        section = table[table["kind"].isin(kinds)]
+        measured = [c for c in columns if c != "threat_model"]
+        section = section[section[measured[0]].notna()] if measured[0] in section else section.iloc[0:0]
+        if section.empty:
             continue
-        keep = ["lens", "attack", "seeds"] + [c for c in columns if c in rows.columns]
-        keep += [f"{c}_std" for c in columns if f"{c}_std" in rows.columns]
-        parts += [f"### {title}", "", markdown_table(rows[keep].dropna(axis=1, how="all")), ""]
-    profile, scenes = table["profile"].iloc[0], table["scenes"].iloc[0]
+        keep = ["lens", "attack", "seeds"] + [c for c in columns if c in section.columns]
+        keep += [f"{c}_std" for c in columns if f"{c}_std" in section.columns]
+        parts += [f"### {title}", "", markdown_table(section[keep].dropna(axis=1, how="all")), ""]
+    failures = failures_markdown(rows)
+    if failures:
+        parts += ["### Failed attackers (no metric; see results.json)", "", failures, ""]
+    profile, scenes = rows[0].profile, rows[0].scenes
     return f"Profile `{profile}`, scenes `{scenes}`; mean ± std over seeds.\n\n" + "\n".join(parts)
 
 
-def write_tables(out: Path, rows: list[dict]) -> pd.DataFrame:
-    """table.csv (every row, full precision) and table.md (the seed summary by row kind, rounded)."""
+def write_tables(out: Path, rows: Sequence[Row]) -> pd.DataFrame:
+    """table.csv (every row flat, full precision, failed rows included) and table.md (the seed
+    summary by row kind, rounded). Returns the summary."""
     out = Path(out)
-    atomic_write_text(out / "table.csv", pd.DataFrame(rows).to_csv(index=False))
-    table = summary_table(rows)
-    atomic_write_text(out / "table.md", sectioned_markdown(table))
-    return table
-
-
-def _psf_rgb(psf: np.ndarray) -> np.ndarray:
-    """(3,K,K) PSF -> RGB image, log-scaled over 3 decades so the rings show."""
-    p = np.log10(np.maximum(psf / psf.max(), 1e-3)) / 3.0 + 1.0
-    return np.clip(p.transpose(1, 2, 0), 0, 1)
-
-
-def write_sample_grid(path: Path, lens_name: str, psf: np.ndarray, scene: np.ndarray, sensor: np.ndarray,
-                      restored: dict[str, np.ndarray], scores: dict[str, str]) -> None:
-    """One PNG: scene, PSF (log scale), sensor image, then each restorer's output with its score."""
-    panels = [("scene", scene), (f"PSF {psf.shape[-1]}x{psf.shape[-1]} px (log)", _psf_rgb(psf)),
-              ("sensor", sensor)]
-    panels += [(f"{name}\n{scores.get(name, '')}", img) for name, img in restored.items()]
-    cols = min(4, len(panels))
-    rows = math.ceil(len(panels) / cols)
-    aspect = scene.shape[0] / scene.shape[1]
-    fig, axes = plt.subplots(rows, cols, figsize=(4 * cols, 4 * aspect * rows + 0.6 * rows), squeeze=False)
-    for ax in axes.flat:
-        ax.axis("off")
-    for ax, (title, img) in zip(axes.flat, panels):
-        ax.imshow(np.clip(img, 0, 1), interpolation="nearest" if "PSF" in title else "antialiased")
-        ax.set_title(title, fontsize=9)
-    fig.suptitle(f"lens: {lens_name}", fontsize=11)
-    save_figure(fig, path, dpi=90)
+    atomic_write_text(out / "table.csv", pd.DataFrame([r.flat() for r in rows]).to_csv(index=False))
+    atomic_write_text(out / "table.md", sectioned_markdown(rows))
+    return summary_table(rows) if any(r.ok for r in rows) else pd.DataFrame()

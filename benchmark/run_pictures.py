@@ -9,10 +9,10 @@ import numpy as np
 import torch
 
 import lenses
-from benchmark.charts.plates import write_plate_gallery
+from benchmark.charts.plate_gallery import write_plate_gallery
 from benchmark.evaluation import Attacked, Target
-from benchmark.plates import readable
-from benchmark.report import write_sample_grid
+from benchmark.plate_scoring import readable
+from benchmark.charts.samples import write_sample_grid
 from benchmark.schema import chain_name
 
 

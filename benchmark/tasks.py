@@ -9,6 +9,7 @@ corrupt result is reported with its path and recomputed.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import os
@@ -23,8 +24,10 @@ import torch
 
 import attacks
 import lenses
+from benchmark import task_costs
+from benchmark.attacker_objects import load as load_attacker
 from benchmark.budget import BudgetExceeded, time_budget
-from benchmark.cache import ArtifactCache, discard, exclusive, read_verified, write_verified
+from benchmark.cache import CHECKSUM_SUFFIX, ArtifactCache, discard, exclusive, read_verified, write_verified
 from benchmark.evaluation import Attacked, Target, attempt, run_reader, run_restorers
 from benchmark.intervals import utility_intervals
 from benchmark.planning import AttackerRef, Task, fit_task
@@ -38,7 +41,7 @@ from benchmark.schema import Row, RowError
 from benchmark.sensing import sense, to_tensor, train_pairs_factory
 from benchmark.utility.measure import has_labels, segmenter, utility_net_for, utility_scores
 from lenses.bound import bound_curve, bound_row
-from lenses.codesign.trainer import pretrain_utility
+from benchmark.utility.clean import clean_utility_net
 
 log = logging.getLogger(__name__)
 
@@ -84,6 +87,24 @@ def load_result(directory: Path, task: Task) -> TaskResult | None:
         return None
 
 
+def is_cached(directory: Path, task: Task) -> bool:
+    """Whether a run would reuse the task's stored result: present, matching its checksum, readable
+    and without failures (see `execute`). Read-only, unlike `load_result` (a corrupt result stays
+    for the run to report), so a dry run changes nothing."""
+    path = directory / task.key / RESULT_FILE
+    try:
+        data = path.read_bytes()
+        expected = path.with_name(path.name + CHECKSUM_SUFFIX).read_text().strip()
+    except FileNotFoundError:
+        return False
+    if hashlib.sha256(data).hexdigest() != expected:
+        return False
+    try:
+        return not TaskResult.from_json(json.loads(data)).has_failures
+    except (ValueError, KeyError, TypeError):  # verified bytes of an older layout
+        return False
+
+
 def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
     """Run one task unless its result exists; publish the result folder in one rename.
 
@@ -105,8 +126,10 @@ def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
         staging.mkdir(parents=True)
         t0 = time.perf_counter()
         result = _KINDS[task.kind](task, cfg, staging)
+        wall_s = time.perf_counter() - t0
         for row in result.rows:
-            row.provenance["wall_s"] = time.perf_counter() - t0
+            row.provenance["wall_s"] = wall_s
+        task_costs.record(staging, task, cfg, wall_s)  # what a dry run's estimates are made of
         write_verified(staging / RESULT_FILE, json.dumps(result.to_json(), default=str, allow_nan=False).encode())
         final = directory / task.key
         if final.exists():  # a corrupt result, or one with failures
@@ -127,7 +150,7 @@ def _scenes(cfg: RunConfig, seed: int) -> list[Scene]:
 def _clean_net(cfg: RunConfig, seed: int, scenes: list[Scene]) -> torch.nn.Module | None:
     if not has_labels(scenes):
         return None
-    return pretrain_utility(cfg.profile, seed, cfg.device, cfg.cache_dir, training_scenes(cfg.scenes),
+    return clean_utility_net(cfg.profile, seed, cfg.device, cfg.cache_dir, training_scenes(cfg.scenes),
                             progress=False)
 
 
@@ -156,7 +179,7 @@ def _load_attackers(refs: tuple[AttackerRef, ...], kind: type[attacks.Attack], b
     """The attackers of `refs` that load; a failed row per attacker that does not."""
     loaded, failed = [], []
     for ref in refs:
-        attacker = attempt(ref.name, "load", lambda: attacks.load(ref.spec))
+        attacker = attempt(ref.name, "load", lambda: load_attacker(ref.spec))
         if isinstance(attacker, RowError):
             if kind is attacks.Reader:
                 failed.append(builder.failed("reader", ref.name, attacker, reader=ref.name))
@@ -255,7 +278,7 @@ def _bound(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
 def _fit(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     """Fit one restorer; its failure is recorded (meta "error"), never raised."""
     (ref,) = task.restorers
-    attacker = attempt(ref.name, "load", lambda: attacks.load(ref.spec))
+    attacker = attempt(ref.name, "load", lambda: load_attacker(ref.spec))
     if isinstance(attacker, RowError):
         return TaskResult(meta={"error": attacker.to_json()})
     ctx = fit_context(_lens(cfg, task.lens, task.seed), cfg, task.seed, None)

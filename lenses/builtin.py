@@ -40,7 +40,7 @@ class SensorOnlyLens(Lens):
 
     def __init__(self, spec: LensSpec):
         # A 1-pixel support keeps the (unused) pupil model tiny; the PSF below does not use it.
-        super().__init__(spec, Geometry(pupil_samples_for(spec, 1), 1, spec.simulation.oversample))
+        super().__init__(spec, Geometry(pupil_samples_for(spec, 1), 1))
         self.initial_energy_fraction = torch.ones(3)
 
     def psf_and_energy(self) -> tuple[torch.Tensor, torch.Tensor]:

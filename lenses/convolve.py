@@ -32,25 +32,48 @@ def convolve_direct(x: torch.Tensor, psf: torch.Tensor) -> torch.Tensor:
     return F.conv2d(_pad(x, k // 2), weight, groups=x.shape[1])
 
 
-def convolve_fft(x: torch.Tensor, psf: torch.Tensor) -> torch.Tensor:
-    """Per-channel convolution through rfft2. Same contract as convolve_direct.
+def fft_shape(height: int, width: int, psf_size_px: int) -> tuple[int, int]:
+    """Transform size (h, w) for an image of height x width convolved with a K x K PSF.
 
-    The circular wrap of the FFT only touches the padding, which is cropped away.
+    At least the reflect-padded size (so the circular wrap only touches the padding, which is
+    cropped away), rounded up to a size with small prime factors only: an awkward size (e.g. 1062)
+    costs 2-3x.
     """
+    r = psf_size_px // 2
+    return next_fast_len(height + 2 * r, real=True), next_fast_len(width + 2 * r, real=True)
+
+
+def psf_otf(psf: torch.Tensor, shape: tuple[int, int]) -> torch.Tensor:
+    """rfft2 of the PSF (C,K,K) centred on index (0, 0) of an (h, w) grid: complex (C, h, w//2+1)."""
     k = psf.shape[-1]
-    r = k // 2
-    xp = _pad(x, r)
-    # Transform sizes with small prime factors only: an awkward size (e.g. 1062) costs 2-3x.
-    h, w = next_fast_len(xp.shape[-2], real=True), next_fast_len(xp.shape[-1], real=True)
-    kernel = torch.zeros(psf.shape[0], h, w, dtype=x.dtype, device=x.device)
-    kernel[:, :k, :k] = psf.to(x.dtype)
-    kernel = torch.roll(kernel, shifts=(-r, -r), dims=(1, 2))  # PSF centre to index (0, 0)
-    y = torch.fft.irfft2(torch.fft.rfft2(xp, s=(h, w)) * torch.fft.rfft2(kernel), s=(h, w))
+    kernel = psf.new_zeros(psf.shape[0], *shape)
+    kernel[:, :k, :k] = psf
+    kernel = torch.roll(kernel, shifts=(-(k // 2), -(k // 2)), dims=(1, 2))
+    return torch.fft.rfft2(kernel)
+
+
+def apply_otf(x: torch.Tensor, otf: torch.Tensor, psf_size_px: int) -> torch.Tensor:
+    """Convolve x (B,C,H,W) with the PSF whose psf_otf on fft_shape(H, W, K) is `otf`, same-size
+    output with reflect padding (the circular wrap only touches the padding, cropped away)."""
+    r = psf_size_px // 2
+    shape = fft_shape(x.shape[-2], x.shape[-1], psf_size_px)
+    y = torch.fft.irfft2(torch.fft.rfft2(_pad(x, r), s=shape) * otf, s=shape)
     return y[..., r:r + x.shape[-2], r:r + x.shape[-1]]
+
+
+def convolve_fft(x: torch.Tensor, psf: torch.Tensor) -> torch.Tensor:
+    """Per-channel convolution through real FFTs. Same contract as convolve_direct."""
+    k = psf.shape[-1]
+    return apply_otf(x, psf_otf(psf.to(x.dtype), fft_shape(x.shape[-2], x.shape[-1], k)), k)
 
 
 def convolve(x: torch.Tensor, psf: torch.Tensor) -> torch.Tensor:
     """Convolve each channel of x (B,C,H,W) with psf (C,K,K), choosing FFT or direct by K."""
     if psf.ndim != 3 or psf.shape[0] != x.shape[1] or psf.shape[-1] % 2 != 1 or psf.shape[-1] != psf.shape[-2]:
         raise ValueError(f"psf must be (C, K, K) with odd K and C = {x.shape[1]}, got {tuple(psf.shape)}")
-    return convolve_fft(x, psf) if psf.shape[-1] > FFT_THRESHOLD_PX else convolve_direct(x, psf)
+    return convolve_fft(x, psf) if uses_fft(psf.shape[-1]) else convolve_direct(x, psf)
+
+
+def uses_fft(psf_size_px: int) -> bool:
+    """Whether convolve takes the FFT path for a K x K PSF."""
+    return psf_size_px > FFT_THRESHOLD_PX

@@ -6,7 +6,7 @@ import dataclasses
 
 import torch
 
-from lenses.convolve import convolve
+from lenses.convolve import apply_otf, convolve, fft_shape, psf_otf, uses_fft
 from lenses.optics import Geometry, PupilModel, choose_geometry
 from lenses.sensor import Sensor
 from lenses.spec import LensSpec
@@ -31,11 +31,15 @@ class Lens(torch.nn.Module):
                                                   requires_grad=spec.mask.trainable)
         self.pupil = PupilModel(spec, geometry)
         self.sensor = Sensor(spec.sensor, spec.optics.aperture_diameter_mm)
-        # Networks co-designed with this lens (set by lenses.codesign); plain attributes, not
-        # submodules, so that lens.parameters() stays the optics alone.
+        # Networks co-designed with this lens and the record of that training (set by
+        # benchmark.codesign); plain attributes, not submodules, so that lens.parameters() stays
+        # the optics alone. Not `training`: that is torch's train/eval flag.
         object.__setattr__(self, "utility_net", None)
         object.__setattr__(self, "adversary", None)
-        object.__setattr__(self, "training", None)
+        object.__setattr__(self, "training_record", None)
+        # OTFs of the current PSF per (transform size, dtype, device), each with the coefficients it
+        # was made from: the forward of a lens that is not being differentiated reuses them.
+        self._otf_cache: dict[tuple, tuple[tuple[float, ...], torch.Tensor]] = {}
 
     @property
     def name(self) -> str:
@@ -55,7 +59,28 @@ class Lens(torch.nn.Module):
 
     def irradiance(self, x: torch.Tensor) -> torch.Tensor:
         """Noise-free optical image on the sensor (B,3,H,W): the scene convolved with the PSF."""
-        return convolve(x, self.psf().to(x.device))
+        k = self.geometry.psf_size_px
+        if not uses_fft(k) or (torch.is_grad_enabled() and self.coefficients_um.requires_grad):
+            return convolve(x, self.psf().to(x.device))
+        return apply_otf(x, self.cached_otf(fft_shape(x.shape[-2], x.shape[-1], k), x.dtype, x.device), k)
+
+    def cached_otf(self, shape: tuple[int, int], dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+        """OTF (3, h, w//2+1) of the current PSF on an (h, w) transform grid, without gradient.
+
+        Cached per grid, dtype and device; an entry is used only while the coefficients still hold
+        the values it was made from (an optimiser step, a load_state_dict or a clamp all change them).
+        """
+        coefficients = tuple(self.coefficients_um.detach().cpu().tolist())
+        key = (shape, dtype, device)
+        entry = self._otf_cache.get(key)
+        if entry is None or entry[0] != coefficients:
+            # Outside inference mode, so that the cached tensor may later meet tensors that need grad.
+            with torch.inference_mode(False), torch.no_grad():
+                otf = psf_otf(self.psf().to(device=device, dtype=dtype), shape)
+            if len(self._otf_cache) >= 8:  # a few image sizes at most; drop the oldest
+                self._otf_cache.pop(next(iter(self._otf_cache)))
+            entry = self._otf_cache[key] = (coefficients, otf)
+        return entry[1]
 
     def forward(self, x: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
         if x.ndim != 4 or x.shape[1] != 3:

@@ -2,8 +2,16 @@
 
 Pupil field (DESIGN.md, paper eq. 1): U = A(rho) exp(i [2 pi / lambda (n_lambda - 1) h(rho, theta)
 + psi rho^2]), psi = pi R^2 / lambda (1/z_o + 1/z_s - 1/f). PSF(x_s) = |F{U}(x_s / (lambda z_s))|^2
-(eq. 2), evaluated by a matrix Fourier transform (MFT) straight at the sensor sub-pixel positions:
-exact sampling per wavelength and only the K x K support that is needed.
+(eq. 2).
+
+Each sensor pixel receives the integral of that intensity over its square, computed exactly for the
+sampled pupil rather than by a quadrature: the field of an N-sample pupil is periodic on the sensor
+(period lambda z_s / dx = lambda F# N) and its intensity is a trigonometric polynomial with at most
+N - 1 harmonics per axis, so L >= 2N - 1 samples per period (one zero-padded FFT of the pupil)
+determine it, and the pixel integral of each harmonic is a sinc. Both steps are one fixed real
+matrix per axis and wavelength (`pixel_integration_matrix`), cached per geometry: pixels = G I G^T.
+A matrix Fourier transform (`mft_kernel`) gives the point-sampled intensity at any sensor position
+for the closed-form checks.
 
 Sign convention: positive Z2 (x tilt) moves the PSF towards +x (increasing column index), positive
 Z3 towards +y (increasing row index).
@@ -13,9 +21,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import torch
+from scipy.fft import next_fast_len
 
 from lenses.materials import refractive_index
 from lenses.spec import N_ZERNIKE, LensSpec, LensSpecError
@@ -88,7 +98,11 @@ class Geometry:
 
     pupil_samples: int   # N: pupil grid is N x N over the aperture diameter
     psf_size_px: int     # K: PSF support (odd) on the sensor grid
-    oversample: int      # s: sub-samples per pixel side
+
+    @property
+    def fft_size(self) -> int:
+        """L: samples per period of the sensor-plane field, >= 2N - 1 so that |field|^2 does not alias."""
+        return next_fast_len(2 * self.pupil_samples - 1)
 
 
 def _odd(x: float) -> int:
@@ -167,14 +181,41 @@ def mft_kernel(positions_mm: torch.Tensor, pupil_x_mm: torch.Tensor, wavelength_
     return torch.polar(torch.ones_like(arg), arg)
 
 
+@lru_cache(maxsize=64)
+def pixel_integration_matrix(psf_size_px: int, pitch_mm: float, period_mm: float, harmonics: int,
+                             fft_size: int) -> np.ndarray:
+    """G (K, L), float64: the integral over sensor pixel k of a period_mm-periodic intensity with at
+    most `harmonics` harmonics, from its L samples at x_j = j period_mm / L.
+
+    Such an intensity is I(x) = sum_{|l| <= harmonics} a_l exp(2 pi i l x / P) with
+    a_l = (1/L) sum_j I(x_j) exp(-2 pi i l x_j / P) (exact for L > 2 harmonics), and the integral of
+    each harmonic over the pixel [c_k - p/2, c_k + p/2] is p sinc(l p / P) exp(2 pi i l c_k / P).
+    So G[k, j] = (p / L) sum_l sinc(l p / P) cos(2 pi l (c_k - x_j) / P) (in mm), and the pixel
+    energies of an (L, L) intensity I are G @ I @ G.T. Pixel K//2 is centred on x = 0.
+    """
+    if fft_size <= 2 * harmonics:
+        raise ValueError(f"fft_size must exceed 2 * harmonics = {2 * harmonics}, got {fft_size}")
+    lags = np.arange(-harmonics, harmonics + 1)
+    centres = (np.arange(psf_size_px) - psf_size_px // 2) * pitch_mm
+    samples = np.arange(fft_size) * period_mm / fft_size
+    to_pixels = np.sinc(lags * pitch_mm / period_mm) * np.exp(2j * np.pi * np.outer(centres, lags) / period_mm)
+    from_samples = np.exp(-2j * np.pi * np.outer(lags, samples) / period_mm)
+    return (to_pixels @ from_samples).real * (pitch_mm / fft_size)
+
+
 class PupilModel(torch.nn.Module):
-    """Differentiable pupil -> sensor-grid PSF for the three colour channels of one lens."""
+    """Differentiable pupil -> sensor-pixel PSF for the three colour channels of one lens.
+
+    The three wavelengths go through each step as one batch; the FFT size and the pixel
+    integration matrices are fixed by the geometry and built once.
+    """
 
     def __init__(self, spec: LensSpec, geometry: Geometry):
         super().__init__()
         c = optical_constants(spec)
         self.constants = c
         self.geometry = geometry
+        self.pitch_mm = spec.sensor.pixel_pitch_um * 1e-3
         n = geometry.pupil_samples
         basis = zernike_basis(N_ZERNIKE, n, dtype=torch.float64)
         coords = (torch.arange(n, dtype=torch.float64) + 0.5) / n * 2 - 1
@@ -186,34 +227,63 @@ class PupilModel(torch.nn.Module):
         self.register_buffer("defocus", torch.tensor(c.defocus_rad, dtype=torch.float64), persistent=False)
         self.pupil_x_mm = coords * c.aperture_radius_mm
         self.pupil_dx_mm = 2 * c.aperture_radius_mm / n
-        xs = torch.as_tensor(sample_positions_mm(geometry.psf_size_px, geometry.oversample,
-                                                 spec.sensor.pixel_pitch_um * 1e-3))
-        self.sample_dx_mm = spec.sensor.pixel_pitch_um * 1e-3 / geometry.oversample
-        kernel = torch.stack([mft_kernel(xs, self.pupil_x_mm, lam, c.sensor_distance_mm) for lam in c.wavelength_mm])
-        self.register_buffer("kernel", kernel, persistent=False)  # (3, K*s, N)
+        # The sensor-plane field of the sampled pupil repeats every lambda z_s / dx.
+        self.period_mm = tuple(lam * c.sensor_distance_mm / self.pupil_dx_mm for lam in c.wavelength_mm)
+        integration = np.stack([pixel_integration_matrix(geometry.psf_size_px, self.pitch_mm, period, n - 1,
+                                                         geometry.fft_size) for period in self.period_mm])
+        # The field is the FFT times dx^2; folding that factor into G spares a pass over (3, L, L).
+        integration = integration * self.pupil_dx_mm**2
+        self.register_buffer("integration", torch.from_numpy(integration), persistent=False)
         self.register_buffer("wavelength_mm", torch.tensor(c.wavelength_mm, dtype=torch.float64), persistent=False)
+        self._mft_kernels: dict[int, torch.Tensor] = {}
+
+    def pupil_phase(self, coefficients_um: torch.Tensor) -> torch.Tensor:
+        """Pupil phase (3, N, N) in rad, float64, for coefficients (6,) in um of glass."""
+        thickness = torch.einsum("j,jyx->yx", coefficients_um.to(torch.float64), self.basis)
+        return self.phase_per_um[:, None, None] * thickness + self.defocus[:, None, None] * self.rho2
 
     def pupil_field(self, coefficients_um: torch.Tensor) -> torch.Tensor:
-        """Complex pupil field U, (3, N, N), for coefficients (6,) in um of glass."""
-        thickness = torch.einsum("j,jyx->yx", coefficients_um.to(torch.float64), self.basis)
-        phase = self.phase_per_um[:, None, None] * thickness + self.defocus[:, None, None] * self.rho2
+        """Complex pupil field U, (3, N, N), complex128, for coefficients (6,) in um of glass."""
+        phase = self.pupil_phase(coefficients_um)
         return torch.polar(self.aperture.expand_as(phase), phase)
 
-    def sampled_intensity(self, coefficients_um: torch.Tensor) -> torch.Tensor:
-        """|F{U}|^2 at the K*s x K*s sub-pixel positions, (3, K*s, K*s), float64, rows = y."""
+    def sampled_intensity(self, coefficients_um: torch.Tensor, oversample: int) -> torch.Tensor:
+        """|F{U}|^2 at the midpoints of s x s cells of every pixel, (3, K*s, K*s), float64, rows = y.
+
+        A point-sampled intensity for the closed-form checks (Airy zero, Strehl ratios); the PSF
+        itself integrates each pixel exactly (`pixel_energy`).
+        """
+        kernel = self._mft_kernels.get(oversample)
+        if kernel is None:
+            xs = torch.as_tensor(sample_positions_mm(self.geometry.psf_size_px, oversample, self.pitch_mm))
+            kernel = torch.stack([mft_kernel(xs, self.pupil_x_mm, lam, self.constants.sensor_distance_mm)
+                                  for lam in self.constants.wavelength_mm]).to(self.basis.device)
+            self._mft_kernels[oversample] = kernel
         u = self.pupil_field(coefficients_um)
-        field = self.kernel @ u @ self.kernel.transpose(1, 2) * self.pupil_dx_mm**2
+        field = kernel @ u @ kernel.transpose(1, 2) * self.pupil_dx_mm**2
         return field.real**2 + field.imag**2
 
     def pixel_energy(self, coefficients_um: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Energy per sensor pixel (3, K, K) (s x s sub-samples summed) and the total energy (3,).
+        """Energy per sensor pixel (3, K, K), the intensity integrated exactly over each pixel, and
+        the total energy (3,), both float64 in mm^2 x pupil intensity units.
 
-        The total comes from Parseval: the integral of |F{U}|^2 over the sensor equals
+        The field at the L x L sensor positions j lambda z_s / (L dx) of one period is the
+        zero-padded FFT of the pupil times dx^2 (times a phase from the grid origin, which |.|^2
+        drops). The total comes from Parseval: the integral of |F{U}|^2 over the sensor equals
         (lambda z_s)^2 times the integral of |U|^2 over the pupil, so the ratio of the two is the
         energy fraction that landed inside the K x K crop.
         """
-        k, s = self.geometry.psf_size_px, self.geometry.oversample
-        pixels = self.sampled_intensity(coefficients_um).reshape(3, k, s, k, s).sum(dim=(2, 4)) * self.sample_dx_mm**2
+        size = self.geometry.fft_size
+        # Double precision throughout, though single would halve the cost and change the PSF by
+        # < 1e-6 in L1: at the co-design start (a flat mask) the PSF's first derivatives with
+        # respect to the even terms (defocus, astigmatism) are exactly zero, and single-precision
+        # rounding noise there is as large as Adam's epsilon, so it would push those coefficients by
+        # up to one learning rate per step in a random direction (and data-parallel ranks would no
+        # longer reproduce the single-process run: tests/lenses/test_ddp.py).
+        u = self.pupil_field(coefficients_um)
+        field = torch.fft.fft2(u, s=(size, size))
+        intensity = field.real**2 + field.imag**2  # |FFT|^2; the dx^4 lives in G
+        pixels = self.integration @ intensity @ self.integration.transpose(1, 2)
         total = self.aperture.sum() * self.pupil_dx_mm**2 * (self.wavelength_mm * self.constants.sensor_distance_mm) ** 2
         return pixels, total
 
@@ -242,9 +312,8 @@ def choose_geometry(spec: LensSpec) -> tuple[Geometry, torch.Tensor]:
     channel. Trainable masks widen it by the worst-case geometric blur allowed by their bounds, so
     that it never changes while the mask trains.
     """
-    s = spec.simulation.oversample
     k0 = initial_support_px(spec)
-    probe = PupilModel(spec, Geometry(pupil_samples_for(spec, k0), k0, s))
+    probe = PupilModel(spec, Geometry(pupil_samples_for(spec, k0), k0))
     coeffs = torch.tensor(spec.mask.zernike_um, dtype=torch.float64)
     # A trainable mask is sized from its bounds alone, not from where it starts: the diffraction
     # support of the unmasked lens widened by the worst-case geometric blur diameter.
@@ -254,7 +323,7 @@ def choose_geometry(spec: LensSpec) -> tuple[Geometry, torch.Tensor]:
     k = energy_support(pixels, total, spec.simulation.psf_energy_fraction)
     if spec.mask.trainable:
         k = min(_odd(k + 2 * geometric_radius_px(spec)), spec.simulation.max_psf_size_px)
-    geometry = Geometry(pupil_samples_for(spec, k), k, s)
+    geometry = Geometry(pupil_samples_for(spec, k), k)
     with torch.no_grad():
         _, fraction = PupilModel(spec, geometry)(coeffs)
     return geometry, fraction

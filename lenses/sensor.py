@@ -22,16 +22,17 @@ def bayer_masks(height: int, width: int, device: torch.device | str = "cpu",
     return torch.stack([r, ~(r | b), b]).to(dtype)
 
 
-def mosaic(rgb: torch.Tensor) -> torch.Tensor:
-    """RGGB mosaic of (B,3,H,W) -> raw (B,1,H,W)."""
-    masks = bayer_masks(rgb.shape[-2], rgb.shape[-1], rgb.device, torch.bool)
-    return torch.where(masks[0], rgb[:, 0], torch.where(masks[2], rgb[:, 2], rgb[:, 1])).unsqueeze(1)
+def mosaic(rgb: torch.Tensor, scale: torch.Tensor | None = None) -> torch.Tensor:
+    """RGGB mosaic of (B,3,H,W) -> raw (B,1,H,W); each site's channel times scale[channel] if given (3,).
 
-
-def _sum4(p: torch.Tensor, offsets: tuple[tuple[int, int], ...]) -> torch.Tensor:
-    """Sum of a reflect-padded plane (..., H+2, W+2) shifted by each (dy, dx), cropped to (H, W)."""
-    h, w = p.shape[-2] - 2, p.shape[-1] - 2
-    return sum(p[..., 1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy, dx in offsets)  # type: ignore[return-value]
+    Four strided copies, one per Bayer site: one pass over a single plane instead of selecting
+    from all three channels.
+    """
+    raw = rgb.new_empty(rgb.shape[0], 1, rgb.shape[-2], rgb.shape[-1])
+    for (dy, dx), channel in (((0, 0), 0), ((0, 1), 1), ((1, 0), 1), ((1, 1), 2)):
+        plane = rgb[:, channel, dy::2, dx::2]
+        raw[:, 0, dy::2, dx::2] = plane if scale is None else plane * scale[channel]
+    return raw
 
 
 def demosaic_bilinear(raw: torch.Tensor) -> torch.Tensor:
@@ -39,18 +40,36 @@ def demosaic_bilinear(raw: torch.Tensor) -> torch.Tensor:
 
     The classic bilinear interpolation (OpenCV's COLOR_Bayer*2RGB in the interior): a missing
     green is the mean of its 4 green neighbours, a missing red/blue the mean of its 2 or 4
-    red/blue neighbours. Written as shifted sums of reflect-101-padded planes (the padding keeps
-    the Bayer phase), several times faster than a depthwise conv2d on the CPU.
+    red/blue neighbours, with reflect-101 borders. Each of the four Bayer sites is handled apart:
+    its neighbours of one colour are stride-2 views of the once-padded raw plane, so every output
+    value is formed once and written in place (no masked full planes, no channel concatenation).
+    An odd height or width is first reflect-padded by one row/column, which supplies exactly the
+    neighbour the border needs, and cropped after.
     """
-    masks = bayer_masks(raw.shape[-2], raw.shape[-1], raw.device, raw.dtype)
-    planes = F.pad(raw * masks, (1, 1, 1, 1), mode="reflect")  # (B,3,H+2,W+2)
-    cross = ((-1, 0), (1, 0), (0, -1), (0, 1))
-    diag = ((-1, -1), (-1, 1), (1, -1), (1, 1))
-    rb = planes[:, 0::2]
-    rb_full = rb[..., 1:-1, 1:-1] + 0.5 * _sum4(rb, cross) + 0.25 * _sum4(rb, diag)
-    g = planes[:, 1:2]
-    g_full = g[..., 1:-1, 1:-1] + 0.25 * _sum4(g, cross)
-    return torch.cat([rb_full[:, :1], g_full, rb_full[:, 1:]], dim=1)
+    h, w = raw.shape[-2:]
+    if h % 2 or w % 2:
+        return demosaic_bilinear(F.pad(raw, (0, w % 2, 0, h % 2), mode="reflect"))[..., :h, :w]
+    padded = F.pad(raw, (1, 1, 1, 1), mode="reflect")[:, 0]  # (B, H+2, W+2); raw[y, x] at [y+1, x+1]
+
+    def at(y: int, x: int) -> torch.Tensor:
+        """raw[2i + y, 2j + x] for every sub-pixel (i, j), y and x in -1..2 (border reflected)."""
+        return padded[:, 1 + y:1 + y + h:2, 1 + x:1 + x + w:2]
+
+    out = raw.new_empty(raw.shape[0], 3, h, w)
+    # Sites: R at (0, 0), G at (0, 1) and (1, 0), B at (1, 1).
+    out[:, 0, 0::2, 0::2] = at(0, 0)
+    out[:, 0, 0::2, 1::2] = 0.5 * (at(0, 0) + at(0, 2))
+    out[:, 0, 1::2, 0::2] = 0.5 * (at(0, 0) + at(2, 0))
+    out[:, 0, 1::2, 1::2] = 0.25 * (at(0, 0) + at(0, 2) + at(2, 0) + at(2, 2))
+    out[:, 1, 0::2, 0::2] = 0.25 * (at(0, -1) + at(0, 1) + at(-1, 0) + at(1, 0))
+    out[:, 1, 0::2, 1::2] = at(0, 1)
+    out[:, 1, 1::2, 0::2] = at(1, 0)
+    out[:, 1, 1::2, 1::2] = 0.25 * (at(0, 1) + at(2, 1) + at(1, 0) + at(1, 2))
+    out[:, 2, 0::2, 0::2] = 0.25 * (at(-1, -1) + at(-1, 1) + at(1, -1) + at(1, 1))
+    out[:, 2, 0::2, 1::2] = 0.5 * (at(-1, 1) + at(1, 1))
+    out[:, 2, 1::2, 0::2] = 0.5 * (at(1, -1) + at(1, 1))
+    out[:, 2, 1::2, 1::2] = at(1, 1)
+    return out
 
 
 def quantize_ste(x: torch.Tensor) -> torch.Tensor:
@@ -83,7 +102,8 @@ class Sensor(torch.nn.Module):
         Gaussian mean + sqrt(mean + read^2) * eps: the same first two moments, differentiable in the
         mean and finite where the mean is 0.
         """
-        mean = mosaic(irradiance.clamp(min=0.0) * self.electrons_per_unit()[:, None, None].to(irradiance))
+        # Mosaic first, then clip: the same values (the scale is positive) on one plane instead of three.
+        mean = mosaic(irradiance, self.electrons_per_unit().to(irradiance)).clamp(min=0.0)
         eps = torch.randn(mean.shape, generator=generator, device=mean.device, dtype=mean.dtype)
         noisy = mean + torch.sqrt(mean + self.spec.read_noise_e**2) * eps
         return noisy.clamp(0.0, self.spec.full_well_e)

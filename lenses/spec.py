@@ -9,6 +9,7 @@ LensSpecError naming the offending field.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -19,6 +20,7 @@ import numpy as np
 
 from lenses.materials import MATERIALS
 from lenses.registry import suggest
+from lenses.zernike import zernike_noll
 
 N_ZERNIKE = 6
 
@@ -43,6 +45,10 @@ class MaskSpec:
     bounds_um: tuple[tuple[float, float], ...] | None = None  # per-term bounds: declares a trainable mask
     random_seed: int | None = None  # draws zernike_um uniformly in [-random_amplitude_um, +] (Z2..Z6)
     random_amplitude_um: float = 0.0
+    # The largest peak-to-valley relief (um of glass) the mask may have to be made; with bounds_um,
+    # every mask inside the bounds must stay within it (checked), so the bounds are a
+    # manufacturing limit rather than a tuning choice.
+    max_sag_um: float | None = None
 
     @property
     def trainable(self) -> bool:
@@ -62,7 +68,6 @@ class SensorSpec:
 
 @dataclass(frozen=True)
 class SimulationSpec:
-    oversample: int = 3  # sub-samples per pixel side for pixel integration (>= 2)
     # PSF support holds at least this energy. 0.99 rather than 0.999: the last 0.9 % lies in faint
     # diffraction rings out to ~260 px; cropping them changes a convolved image by 56 dB PSNR,
     # 13 dB below the sensor's own shot noise at mid-grey, at a 7x smaller K (README, measured).
@@ -89,6 +94,8 @@ class LensSpec:
             d["mask"].pop("bounds_um")
         if d["mask"]["random_seed"] is None:
             d["mask"].pop("random_seed")
+        if d["mask"]["max_sag_um"] is None:
+            d["mask"].pop("max_sag_um")
         return d
 
 
@@ -137,10 +144,16 @@ def _check_keys(table: dict, allowed: set[str], where: str) -> None:
             )
 
 
+# Keys that older specs (and the leaderboard entries that store them) carry but that no longer mean
+# anything: `simulation.oversample` chose the s x s sub-pixel sums that exact pixel integration replaced.
+_OBSOLETE_KEYS = {"simulation": {"oversample"}}
+
+
 def _section(raw: dict, name: str) -> dict:
     table = raw.get(name, {})
     if not isinstance(table, dict):
         raise LensSpecError(f"[{name}] must be a table, got {type(table).__name__}")
+    table = {k: v for k, v in table.items() if k not in _OBSOLETE_KEYS.get(name, set())}
     _check_keys(table, {f.name for f in dataclasses.fields(_SECTIONS[name])}, name)
     return table
 
@@ -188,8 +201,33 @@ def _mask(t: dict) -> MaskSpec:
         for i, ((lo, hi), c) in enumerate(zip(bounds, coeffs)):
             if not lo <= c <= hi:
                 raise LensSpecError(f"mask.zernike_um[{i}] = {c} lies outside mask.bounds_um[{i}] = [{lo}, {hi}]")
+    max_sag = None
+    if "max_sag_um" in t:
+        max_sag = _positive(t["max_sag_um"], "mask.max_sag_um")
+        worst = worst_sag_um(bounds if bounds is not None else tuple((c, c) for c in coeffs))
+        if worst > max_sag:
+            what = "the worst mask inside mask.bounds_um" if bounds is not None else "mask.zernike_um"
+            raise LensSpecError(f"{what} has a peak-to-valley relief of {worst:.3f} um, more than mask.max_sag_um = "
+                                f"{max_sag}; narrow the bounds or raise max_sag_um")
     return MaskSpec(zernike_um=tuple(coeffs), bounds_um=bounds, random_seed=seed,
-                    random_amplitude_um=amplitude)  # type: ignore[arg-type]
+                    random_amplitude_um=amplitude, max_sag_um=max_sag)  # type: ignore[arg-type]
+
+
+# Polar grid over the closed unit disk (rim included, where the relief peaks) for worst_sag_um.
+_RHO, _THETA = np.meshgrid(np.linspace(0.0, 1.0, 201), np.linspace(0.0, 2 * np.pi, 361))
+
+
+def worst_sag_um(bounds_um: tuple[tuple[float, float], ...]) -> float:
+    """Largest peak-to-valley relief (um) of any mask h = sum_j c_j Z_j with lo_j <= c_j <= hi_j.
+
+    The relief max(h) - min(h) over the pupil is convex in c, so its maximum over the box of
+    bounds lies at a corner; every corner is evaluated on a polar grid (201 radii x 361 angles,
+    rim included), which resolves the relief of these low orders to about 1e-4 relative.
+    """
+    basis = np.stack([zernike_noll(j + 1, _RHO, _THETA).ravel() for j in range(len(bounds_um))])
+    corners = np.array(list(itertools.product(*[sorted({lo, hi}) for lo, hi in bounds_um])))
+    relief = corners @ basis
+    return float((relief.max(axis=1) - relief.min(axis=1)).max())
 
 
 def _sensor(t: dict) -> SensorSpec:
@@ -215,7 +253,6 @@ def _simulation(t: dict) -> SimulationSpec:
     if max_k % 2 == 0:
         raise LensSpecError(f"simulation.max_psf_size_px = {max_k} must be odd (the PSF has a centre pixel)")
     return SimulationSpec(
-        oversample=_integer(t.get("oversample", d.oversample), "simulation.oversample", 2),
         psf_energy_fraction=frac,
         max_psf_size_px=max_k,
         max_pupil_samples=_integer(t.get("max_pupil_samples", d.max_pupil_samples), "simulation.max_pupil_samples", 32),

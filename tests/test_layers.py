@@ -13,9 +13,6 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("lenses", "attacks", "benchmark")
 # What each package may import of ours (anything else of ours is a backward arrow).
 ALLOWED = {"lenses": {"lenses"}, "attacks": {"lenses", "attacks"}, "benchmark": {"lenses", "attacks", "benchmark"}}
-# Known backward arrows being removed elsewhere. Co-design lives in lenses/codesign until its move
-# to benchmark/codesign lands (issue 12); the coordinator deletes this entry at that merge.
-KNOWN_BACKWARD = {"lenses.codesign"}
 
 
 def module_name(path: Path) -> str:
@@ -63,8 +60,6 @@ def backward_imports(graph: dict[str, set[str]]) -> list[str]:
     bad = []
     for name, deps in sorted(graph.items()):
         top = name.split(".")[0]
-        if any(name == k or name.startswith(k + ".") for k in KNOWN_BACKWARD):
-            continue
         bad += [f"{name} -> {d}" for d in sorted(deps) if d.split(".")[0] not in ALLOWED[top]]
     return bad
 
@@ -114,7 +109,7 @@ def test_no_import_cycle():
 
 def test_the_checks_catch_what_they_look_for():
     graph = {"lenses.optics": {"attacks.base"}, "attacks.base": {"benchmark.cache"}, "benchmark.a": {"benchmark.b"},
-             "benchmark.b": {"benchmark.c"}, "benchmark.c": {"benchmark.a"}, "lenses.codesign.x": {"benchmark.a"}}
+             "benchmark.b": {"benchmark.c"}, "benchmark.c": {"benchmark.a"}}
     assert backward_imports(graph) == ["attacks.base -> benchmark.cache", "lenses.optics -> attacks.base"]
     assert cycles(graph) == [["benchmark.a", "benchmark.b", "benchmark.c"]]
 

@@ -7,6 +7,21 @@ stride 2, back to full resolution.
 
 Everything is out-of-place (no ``inplace=True`` ReLU), and only ops with second derivatives are
 used, because the gradient-penalty scheme differentiates d L_deb / d theta_opt again.
+
+The co-design adversary uses two options that depart from the paper's RED10, because without
+them it never beats the trivial attack (measured on the smoke profile's starting lens, width 8,
+600 Adam steps: 18.5 dB against 24.8 dB for the white-balanced sensor image; with a residual
+alone it stays at 24.81 dB, since nothing full-resolution passes the 1/16 bottleneck):
+
+- ``skips``: RED-Net's own symmetric skip connections (Mao et al. 2016): each encoder feature map
+  is added to the decoder's at the same resolution, before its ReLU. No parameters are added, so
+  the state dict is the same as without.
+- ``residual``: the network sees the white-balanced input x / input_gain (``input_gain`` a
+  persistent buffer, set to the lens's per-channel sensor gain) and predicts a correction to it;
+  the last layer starts at zero, so an untrained network returns the white-balanced image.
+  The output is not squashed (no sigmoid): scorers clamp it to [0, 1].
+
+With both, 100 steps beat the white-balanced image by 1.35 dB on the same data.
 """
 
 from __future__ import annotations
@@ -32,6 +47,10 @@ class RED10(nn.Module):
     Args:
         width: feature channels of every hidden layer (the paper's RED-Net uses 64).
         in_channels: image channels, also the output channels.
+        skips: add each encoder feature map to the decoder's at the same resolution (RED-Net's
+            symmetric skips; the paper's RED10 has none).
+        residual: predict a correction to the white-balanced input x / input_gain instead of the
+            image through a sigmoid (output then unbounded; clamp it to [0, 1] to score it).
 
     Attributes:
         encoder: conv layers; its output is the bottleneck at resolution (H/16, W/16).
@@ -39,9 +58,11 @@ class RED10(nn.Module):
     """
 
     downsampling = 16
+    input_gain: torch.Tensor
 
-    def __init__(self, width: int = 64, in_channels: int = 3) -> None:
+    def __init__(self, width: int = 64, in_channels: int = 3, skips: bool = False, residual: bool = False) -> None:
         super().__init__()
+        self.skips, self.residual = skips, residual
         encoder: list[nn.Module] = [nn.Conv2d(in_channels, width, kernel_size=3, padding=1), nn.ReLU()]
         for _ in range(4):
             encoder += [nn.Conv2d(width, width, kernel_size=3, stride=2, padding=1), nn.ReLU()]
@@ -49,15 +70,33 @@ class RED10(nn.Module):
         for _ in range(4):
             # kernel 4, stride 2, padding 1 doubles the size exactly: (n - 1) * 2 - 2 + 4 = 2n.
             decoder += [nn.ConvTranspose2d(width, width, kernel_size=4, stride=2, padding=1), nn.ReLU()]
-        decoder.append(nn.ConvTranspose2d(width, in_channels, kernel_size=3, padding=1))
+        last = nn.ConvTranspose2d(width, in_channels, kernel_size=3, padding=1)
+        decoder.append(last)
         self.encoder = nn.Sequential(*encoder)
         self.decoder = nn.Sequential(*decoder)
+        if residual:
+            self.register_buffer("input_gain", torch.ones(in_channels))
+            nn.init.zeros_(last.weight)
+            nn.init.zeros_(last.bias)  # type: ignore[arg-type]  # ConvTranspose2d(bias=True) has one
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         _, _, h, w = x.shape
+        if self.residual:
+            x = x / self.input_gain.view(1, -1, 1, 1)
         pad_h = -h % self.downsampling
         pad_w = -w % self.downsampling
-        if pad_h or pad_w:
-            x = F.pad(x, (0, pad_w, 0, pad_h), mode="replicate")
-        y = torch.sigmoid(self.decoder(self.encoder(x)))
-        return y[:, :, :h, :w]
+        padded = F.pad(x, (0, pad_w, 0, pad_h), mode="replicate") if pad_h or pad_w else x
+        z = self._skipped(padded) if self.skips else self.decoder(self.encoder(padded))
+        z = z[:, :, :h, :w]
+        return x + z if self.residual else torch.sigmoid(z)
+
+    def _skipped(self, x: torch.Tensor) -> torch.Tensor:
+        """Encoder then decoder, each encoder output added to the decoder's input of its resolution."""
+        features = []
+        for conv, relu in zip(self.encoder[0::2], self.encoder[1::2]):
+            x = relu(conv(x))
+            features.append(x)
+        z = features.pop()
+        for deconv, relu in zip(self.decoder[0:-1:2], self.decoder[1::2]):
+            z = relu(deconv(z) + features.pop())
+        return self.decoder[-1](z)

@@ -1,25 +1,39 @@
-"""Charts of a run, rendered from its results; ``save_figure`` is the one way they are written."""
+"""Every chart of the suite, one module per chart; ``new_figure`` and ``save_figure`` are the one way
+a chart is made and written.
+
+Charts are built on matplotlib's object API (``matplotlib.figure.Figure``), never through pyplot:
+no global backend to select before an import, no figure registry to leak, and ``savefig`` renders
+with the Agg canvas whatever backend the caller's session (a notebook, a GUI) has chosen. Each
+chart module offers a ``*_figure`` function that returns the figure (for tests and notebooks) and a
+``write_*`` function that saves it.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
-import matplotlib
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+# No matplotlib version stamp in the PNGs: the same data render to byte-identical files.
+PNG_METADATA: dict[str, Any] = {"Software": None}
 
 
-def save_figure(fig: plt.Figure, path: Path | str, dpi: int = 100, metadata: dict | None = None,
+def new_figure(**kwargs: Any) -> Figure:
+    """A figure detached from pyplot (``kwargs`` as for ``matplotlib.figure.Figure``: figsize in inches, ...)."""
+    return Figure(**kwargs)
+
+
+def save_figure(fig: Figure, path: Path | str, dpi: int = 100, metadata: dict | None = None,
                 layout: bool | tuple[float, float, float, float] = True) -> Path:
     """Lay out (``layout``: True for tight_layout, a rect tuple for tight_layout(rect=...), False for
-    none), write ``fig`` to ``path`` (parent folders created) and free it. Returns the path."""
+    none), write ``fig`` to ``path`` (parent folders created; format from the suffix) with fixed
+    metadata (``metadata`` added to PNG_METADATA). Returns the path."""
     if layout is True:
         fig.tight_layout()
     elif layout:
         fig.tight_layout(rect=layout)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi, metadata=metadata)
-    plt.close(fig)
+    fig.savefig(path, dpi=dpi, metadata={**PNG_METADATA, **(metadata or {})})
     return path

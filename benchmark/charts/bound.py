@@ -4,14 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from benchmark.charts import save_figure  # noqa: E402
-from lenses.bound import ASSUMPTIONS  # noqa: E402
+from benchmark.charts import new_figure, save_figure
+from lenses.bound import ASSUMPTIONS
 
 
 def write_bound_chart(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, eps: float | None = 0.05) -> Path:
@@ -23,7 +19,8 @@ def write_bound_chart(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Pa
     """
     if not curves:
         raise ValueError("no bound curves to chart: pass {lens name: (widths_px, ceiling)}")
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    fig = new_figure(figsize=(6.4, 4.2))
+    ax = fig.subplots()
     for name, (widths, ceiling) in curves.items():
         widths, ceiling = np.asarray(widths), np.asarray(ceiling)
         if widths.shape != ceiling.shape:

@@ -2,22 +2,21 @@
 
 from __future__ import annotations
 
-
-import matplotlib
 import matplotlib.ticker
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+from benchmark.charts import new_figure
 
 KNOB_TITLES = {"energy_fraction": "PSF support K (energy fraction held)", "pupil_samples": "pupil grid N",
-               "oversample": "pixel oversampling s"}
+               "oversample": "pixel integration: s x s midpoints (0 = exact)"}
 
 
-def psf_grid_figure(study: dict) -> plt.Figure:
+def psf_grid_figure(study: dict) -> Figure:
     """One panel per knob: image PSNR against the reference model vs PSF+gradient time, one line per lens,
     the suite's default circled."""
     knobs = list(dict.fromkeys(r["knob"] for r in study["records"]))
-    fig, axes = plt.subplots(1, len(knobs), figsize=(5 * len(knobs), 4.2), sharey=True)
+    fig = new_figure(figsize=(5 * len(knobs), 4.2))
+    axes = fig.subplots(1, len(knobs), sharey=True, squeeze=False)[0]
     for ax, knob in zip(axes, knobs):
         records = [r for r in study["records"] if r["knob"] == knob]
         for lens in dict.fromkeys(r["lens"] for r in records):
@@ -39,10 +38,11 @@ def psf_grid_figure(study: dict) -> plt.Figure:
     return fig
 
 
-def utility_size_figure(study: dict) -> plt.Figure:
+def utility_size_figure(study: dict) -> Figure:
     """mIoU against parameters (log), one point per SegFormer variant, annotated with its speed."""
     records = sorted(study["records"], key=lambda r: r["params"])
-    fig, ax = plt.subplots(figsize=(6, 4.2))
+    fig = new_figure(figsize=(6, 4.2))
+    ax = fig.subplots()
     ax.plot([r["params"] / 1e6 for r in records], [r["miou"] for r in records], "o-")
     for r in records:
         ax.annotate(f"{r['variant']}\n{r['images_per_s']:.1f} img/s", (r["params"] / 1e6, r["miou"]),

@@ -22,7 +22,7 @@ from benchmark.run_config import RunConfig
 from benchmark.sensing import to_tensor
 from benchmark.utility.measure import utility_metrics
 from benchmark.scenes import load_scenes
-from lenses.codesign.trainer import pretrain_utility
+from benchmark.utility.clean import clean_utility_net
 
 VARIANTS = ("tiny", "b0-narrow", "b0")
 
@@ -38,7 +38,7 @@ def measure(profile: Profile, variants: tuple[str, ...] = VARIANTS, seed: int = 
     for variant in variants:
         p = dataclasses.replace(profile, utility_model=variant)
         t0 = time.perf_counter()
-        net = pretrain_utility(p, seed, "cpu", cache_dir, progress=False)
+        net = clean_utility_net(p, seed, "cpu", cache_dir, progress=False)
         train_s = time.perf_counter() - t0
         cfg = RunConfig(lenses=[], attacks=[], scenes="synthetic", profile=p, seeds=[seed], cache_dir=cache_dir)
         with torch.no_grad():

@@ -9,8 +9,8 @@ import numpy as np
 import torch
 
 import lenses
-from lenses.codesign.schemes import SCHEMES
-from lenses.codesign.trainer import CoDesign
+from benchmark.codesign.schemes import SCHEMES
+from benchmark.codesign.trainer import CoDesign
 from benchmark.run_config import RunConfig, training_scenes
 from benchmark.scenes import CLASS_NAMES, Scene
 from benchmark.utility.scoring import confusion_matrix, predict, scores, window_for

@@ -1,16 +1,19 @@
 """The paper's findings table is computed from the entries: its verdicts follow the numbers."""
 
-from benchmark.leaderboard_report import findings_table
+from benchmark.leaderboard_entries import make_entry
+from benchmark.leaderboard_tables import findings_table
+from benchmark.schema import Row
 
 
-def _entry(lens: str, miou: list[float], psnr: list[float]) -> dict:
-    def stats(values):
-        mean = sum(values) / len(values)
-        std = (sum((v - mean) ** 2 for v in values) / (len(values) - 1)) ** 0.5 if len(values) > 1 else 0.0
-        return {"mean": mean, "std": std, "values": values}
-    return {"lens": lens, "profile": "quick", "seeds": list(range(len(miou))), "rows": [
-        {"attack": "utility", "metrics": {"miou": stats(miou)}},
-        {"attack": "wiener-known-psf", "metrics": {"psnr_db": stats(psnr)}}]}
+def _row(lens: str, kind: str, attack: str, seed: int, metrics: dict) -> Row:
+    return Row(kind=kind, lens=lens, attack=attack, restorer=None if kind == "utility" else attack, seed=seed,
+               profile="quick", scenes="synthetic", metrics=metrics)
+
+
+def _entry(lens: str, miou: list[float], psnr: list[float]):
+    rows = [_row(lens, "utility", "utility", s, {"miou": v}) for s, v in enumerate(miou)]
+    rows += [_row(lens, "restorer", "wiener-known-psf", s, {"psnr_db": v}) for s, v in enumerate(psnr)]
+    return make_entry(lens, rows, {"name": "quick"}, None, None)
 
 
 def _verdicts(entries):
@@ -42,6 +45,7 @@ def test_single_seeds_are_flagged_and_missing_lenses_skipped():
 
 def test_attackers_only_one_lens_met_do_not_decide():
     strong = _entry("os-d-1000", [0.2], [22.0])
-    strong["rows"].append({"attack": "nafnet-known-pairs", "metrics": {"psnr_db": {"mean": 35.0, "std": 0.0}}})
+    strong = make_entry("os-d-1000", strong.rows + [_row("os-d-1000", "restorer", "nafnet-known-pairs", 0,
+                                                         {"psnr_db": 35.0})], {"name": "quick"}, None, None)
     verdicts = _verdicts([_entry("gp", [0.3], [21.0]), strong])
     assert verdicts["GP gives lambda_deb = 1000 privacy (attacker PSNR no higher)"] == "holds (one seed: no spread)"

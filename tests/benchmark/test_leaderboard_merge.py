@@ -4,50 +4,121 @@ import json
 
 import pytest
 
-from benchmark import leaderboard
+from benchmark import leaderboard, leaderboard_entries
+from benchmark.leaderboard_entries import Entry
+from benchmark.schema import Row
 
 PROFILE = {"name": "smoke", "n_val": 4, "image_size": (128, 256)}  # a tuple, as Profile.to_dict() gives
 
 
-def _rows(attacks: list[str], commit: str, value: float = 1.0, seeds: tuple[int, ...] = (0,)) -> list[dict]:
-    return [{"lens": "sharp", "attack": a, "seed": s, "profile": "smoke", "scenes": "synthetic",
-             "config_hash": f"{a}-{commit}", "git_commit": commit, "date": "d", "psnr": value + s}
-            for a in attacks for s in seeds]
+def _rows(attacks: list[str], commit: str, value: float = 1.0, seeds: tuple[int, ...] = (0,)) -> list[Row]:
+    return [Row(kind="restorer", lens="sharp", attack=a, restorer=a, seed=s, profile="smoke", scenes="synthetic",
+                metrics={"psnr_db": value + s}, settings_hash=f"{a}-{commit}",
+                provenance={"git_commit": commit, "date": "d"}) for a in attacks for s in seeds]
+
+
+def _settings(attacks: list[str], commit: str) -> dict:
+    return {f"{a}-{commit}": {"attacker": a} for a in attacks}
+
+
+def _load(path) -> Entry:
+    return Entry.from_json(json.loads(path.read_text()))
 
 
 def test_fewer_attackers_keep_the_richer_rows_with_their_provenance(tmp_path):
-    (path,) = leaderboard.publish(_rows(["identity", "lpdr-oracle"], "aaa"), PROFILE, {}, tmp_path)
-    leaderboard.publish(_rows(["identity"], "bbb", value=2.0), PROFILE, {}, tmp_path)
-    entry = json.loads(path.read_text())
-    rows = {r["attack"]: r for r in entry["rows"]}
-    assert set(rows) == {"identity", "lpdr-oracle"}
-    assert rows["identity"]["metrics"]["psnr"]["mean"] == 2.0 and "provenance" not in rows["identity"]
-    assert rows["lpdr-oracle"]["provenance"]["git_commit"] == "aaa"
-    assert entry["provenance"]["git_commit"] == "bbb"
-    assert entry["config_hashes"] == ["identity-aaa", "identity-bbb", "lpdr-oracle-aaa"]
+    (path,) = leaderboard.publish(_rows(["identity", "lpdr-oracle"], "aaa"), PROFILE, {}, tmp_path,
+                                  _settings(["identity", "lpdr-oracle"], "aaa"))
+    leaderboard.publish(_rows(["identity"], "bbb", value=2.0), PROFILE, {}, tmp_path, _settings(["identity"], "bbb"))
+    entry = _load(path)
+    assert [c.attack for c in entry.chains()] == ["identity", "lpdr-oracle"]
+    assert entry.metric("identity", "psnr_db").mean == 2.0
+    assert entry.chain("identity").rows[0].provenance["git_commit"] == "bbb"
+    assert entry.chain("lpdr-oracle").rows[0].provenance["git_commit"] == "aaa"
+    # Every stored row leads back to its settings.
+    assert sorted(entry.settings) == ["identity-bbb", "lpdr-oracle-aaa"]
 
 
 def test_a_different_measurement_replaces_the_entry(tmp_path):
     (path,) = leaderboard.publish(_rows(["identity", "lpdr-oracle"], "aaa"), PROFILE, {}, tmp_path)
     leaderboard.publish(_rows(["identity"], "bbb"), {**PROFILE, "n_val": 8}, {}, tmp_path)
-    assert [r["attack"] for r in json.loads(path.read_text())["rows"]] == ["identity"]
+    assert [c.attack for c in _load(path).chains()] == ["identity"]
 
 
 def test_more_seeds_for_some_attackers_keep_the_others_with_their_seeds(tmp_path):
     (path,) = leaderboard.publish(_rows(["identity", "nafnet"], "aaa"), PROFILE, {}, tmp_path)
     leaderboard.publish(_rows(["identity"], "bbb", seeds=(0, 1, 2)), PROFILE, {}, tmp_path)
-    entry = json.loads(path.read_text())
-    rows = {r["attack"]: r for r in entry["rows"]}
-    assert entry["seeds"] == [0, 1, 2]
-    assert rows["identity"]["seeds"] == [0, 1, 2] and rows["identity"]["metrics"]["psnr"]["std"] == 1.0
-    assert rows["nafnet"]["seeds"] == [0] and rows["nafnet"]["provenance"]["git_commit"] == "aaa"
+    entry = _load(path)
+    assert entry.seeds == [0, 1, 2]
+    assert entry.chain("identity").seeds == (0, 1, 2) and entry.metric("identity", "psnr_db").std == 1.0
+    assert entry.chain("nafnet").seeds == (0,) and entry.chain("nafnet").rows[0].provenance["git_commit"] == "aaa"
 
 
 def test_seeds_with_nothing_to_score_leave_mean_and_std_finite():
-    rows = [{"lens": "x", "attack": "lpdr", "seed": s, "plate_acc": v} for s, v in enumerate([0.5, float("nan"), 0.25])]
-    (row,) = leaderboard.aggregate(rows)
-    stats = row["metrics"]["plate_acc"]
-    assert stats["mean"] == 0.375 and stats["std"] == pytest.approx(0.1767767, rel=1e-6)
-    assert stats["values"] == [0.5, None, 0.25]
-    (row,) = leaderboard.aggregate(rows[:2])
-    assert row["metrics"]["plate_acc"]["std"] == 0.0
+    rows = [Row(kind="reader", lens="x", attack="lpdr", reader="lpdr", seed=s, profile="smoke", scenes="synthetic",
+                metrics={} if v is None else {"plate_acc": v}) for s, v in enumerate([0.5, None, 0.25])]
+    entry = leaderboard_entries.make_entry("x", rows, PROFILE, None, None)
+    stats = entry.metric("lpdr", "plate_acc")
+    assert stats.mean == 0.375 and stats.std == pytest.approx(0.1767767, rel=1e-6)
+    assert stats.values == (0.5, None, 0.25)
+    assert leaderboard_entries.make_entry("x", rows[:2], PROFILE, None, None).metric("lpdr", "plate_acc").std == 0.0
+
+
+def test_intervals_of_the_seeds_are_enveloped():
+    rows = _rows(["identity"], "aaa", seeds=(0, 1))
+    rows[0].set_interval("psnr_db", 0.5, 1.5, "bootstrap")
+    rows[1].set_interval("psnr_db", 1.8, 2.4, "bootstrap")
+    entry = leaderboard_entries.make_entry("sharp", rows, PROFILE, None, None)
+    assert entry.metric("identity", "psnr_db").interval == (0.5, 2.4)
+
+
+V1_ENTRY = {
+    "entry_version": 1, "lens": "gp", "profile": "quick", "scenes": "synthetic", "seeds": [0, 1],
+    "profile_values": {"name": "quick"}, "coefficients_um": [0.0, 0.1], "lens_spec": {"name": "gp"},
+    "config_hashes": ["h0", "h1"],
+    "provenance": {"git_commit": "new", "date": "d", "device": "cpu", "packages": "p", "python": "3", "threads": 2},
+    "rows": [
+        {"attack": "utility", "seeds": [0, 1], "metrics": {
+            "miou": {"mean": 0.25, "std": 0.07071067811865477, "values": [0.2, 0.3]},
+            "wall_s": {"mean": 2.0, "std": 0.0, "values": [2.0, 2.0]}}},
+        {"attack": "bound", "seeds": [0], "assumptions": "a, b", "metrics": {
+            "bound_width_eps_t1": {"mean": 40.0, "std": 0.0, "values": [40.0]}}},
+        {"attack": "lpdr", "seeds": [0, 1], "threat_model": "sensor-access", "metrics": {
+            "plate_acc": {"mean": 0.5, "std": 0.0, "values": [0.5, None]}},
+         "provenance": {"git_commit": "old", "date": "e", "device": "cpu", "packages": "p", "python": "3",
+                        "threads": 2}},
+        {"attack": "wiener-known-psf>lpdr", "seeds": [0], "threat_model": "sensor-access", "metrics": {
+            "plate_acc": {"mean": 0.1, "std": 0.0, "values": [0.1]}}},
+    ],
+}
+
+
+def test_version_1_entries_migrate_without_loss(tmp_path):
+    migrated = leaderboard_entries.migrate_entry(V1_ENTRY)
+    entry = Entry.from_json(migrated)
+    assert migrated["entry_version"] == leaderboard_entries.ENTRY_VERSION == 2
+    kinds = {c.attack: c.kind for c in entry.chains()}
+    # lpdr's seed 1 had no readable plate (no plate_acc) and is still a reader's row.
+    assert kinds == {"utility": "utility", "bound": "bound", "lpdr": "reader", "wiener-known-psf>lpdr": "chain"}
+    utility = entry.chain("utility")
+    assert [r.metrics for r in utility.rows] == [{"miou": 0.2}, {"miou": 0.3}]
+    assert [r.provenance["wall_s"] for r in utility.rows] == [2.0, 2.0]
+    miou = entry.metric("utility", "miou")
+    assert miou.mean == 0.25 and miou.std == pytest.approx(0.0707107)
+    assert entry.chain("bound").notes == {"bound_assumptions": "a, b"}
+    lpdr = entry.chain("lpdr")
+    assert lpdr.seeds == (0, 1) and lpdr.metrics["plate_acc"].values == (0.5, None)
+    assert lpdr.rows[0].provenance["git_commit"] == "old" and utility.rows[0].provenance["git_commit"] == "new"
+    chain = entry.chain("wiener-known-psf>lpdr").rows[0]
+    assert (chain.restorer, chain.reader, chain.threat_model) == ("wiener-known-psf", "lpdr", "sensor-access")
+    # Loading a version-1 file migrates it; migrate_directory rewrites it once, in the new format.
+    (tmp_path / "entries").mkdir()
+    path = tmp_path / "entries" / "gp__quick__synthetic.json"
+    path.write_text(json.dumps(V1_ENTRY))
+    assert leaderboard_entries.load_entries(tmp_path)[0].to_json() == entry.to_json()
+    assert leaderboard_entries.migrate_directory(tmp_path) == [path]
+    assert json.loads(path.read_text())["entry_version"] == 2 and leaderboard_entries.migrate_directory(tmp_path) == []
+
+
+def test_unknown_versions_are_named(tmp_path):
+    with pytest.raises(ValueError, match="entry_version 7"):
+        Entry.from_json({**V1_ENTRY, "entry_version": 7})

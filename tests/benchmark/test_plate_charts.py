@@ -1,15 +1,14 @@
-"""Plate charts (benchmark/charts/plates.py): accuracy-by-width curves and the crop gallery."""
+"""Plate charts (benchmark/charts/plate_width.py, plate_gallery.py): accuracy-by-width curves and the crop gallery."""
 
 from __future__ import annotations
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 import torch
 
 from attacks import PlateRead
-from benchmark.charts import plates as charts
-from benchmark.plates import readable
+from benchmark.charts import plate_gallery, plate_width
+from benchmark.plate_scoring import readable
 from benchmark.scenes import load_scenes
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -26,42 +25,38 @@ def records() -> list[dict]:
 
 
 def test_width_accuracy_bins_and_pools():
-    curves = charts.width_accuracy(records(), bins_px=(16, 64, 128))
+    curves = plate_width.width_accuracy(records(), bins_px=(16, 64, 128))
     edges, acc, counts = curves[("sharp", "lpdr-oracle")]
     assert list(edges) == [16, 64, 128] and list(counts) == [1, 1, 2]
     np.testing.assert_allclose(acc, [0.0, 1.0, 1.0])
     np.testing.assert_allclose(curves[("gp", "nafnet-known-pairs>lpdr-oracle")][1], [0.0, 1.0, 0.5])
 
 
-def test_width_chart_has_one_panel_per_lens_and_one_curve_per_chain(tmp_path, monkeypatch):
-    saved = []
-    monkeypatch.setattr(plt, "close", lambda fig: saved.append(fig))
-    path = charts.write_plate_width_chart(records(), tmp_path / "plates" / "width.png")
+def test_width_chart_has_one_panel_per_lens_and_one_curve_per_chain(tmp_path):
+    path = plate_width.write_plate_width_chart(records(), tmp_path / "plates" / "width.png")
     assert path.read_bytes()[:8] == PNG_MAGIC
-    sharp, gp = [ax for ax in saved[0].axes if ax.get_visible()]
+    sharp, gp = [ax for ax in plate_width.plate_width_figure(records()).axes if ax.get_visible()]
     assert (sharp.get_title(), gp.get_title()) == ("sharp", "gp")
     assert len(sharp.get_lines()) == 1 and len(gp.get_lines()) == 2
     assert {t.get_text().split(" (")[0] for t in gp.get_legend().get_texts()} == {
         "lpdr-oracle", "nafnet-known-pairs>lpdr-oracle"}
     with pytest.raises(ValueError, match="no plate records"):
-        charts.write_plate_width_chart([], tmp_path / "empty.png")
+        plate_width.write_plate_width_chart([], tmp_path / "empty.png")
 
 
-def test_gallery_shows_every_source_and_what_was_read(tmp_path, monkeypatch):
+def test_gallery_shows_every_source_and_what_was_read(tmp_path):
     scenes = load_scenes("synthetic", "val", 4, (512, 1024), 0)
     sharp = torch.from_numpy(np.stack([s.image for s in scenes])).permute(0, 3, 1, 2)
     index, plate = max(((i, p) for i, s in enumerate(scenes) for p in s.plates if readable(p)),
                        key=lambda ip: ip[1].box_xyxy[2] - ip[1].box_xyxy[0])  # the gallery's first row
     reads = {"sharp": [[PlateRead(plate.text, tuple(map(float, plate.box_xyxy)), 0.9)] if i == index else []
                        for i in range(len(scenes))]}
-    saved = []
-    monkeypatch.setattr(plt, "close", lambda fig: saved.append(fig))
     images = {"sharp": sharp, "sensor": sharp * 0.5, "wiener-known-psf": sharp.flip(-1)}
-    path = charts.write_plate_gallery(images, scenes, reads, tmp_path / "gallery.png", max_plates=3)
+    path = plate_gallery.write_plate_gallery(images, scenes, reads, tmp_path / "gallery.png", max_plates=3)
     assert path.read_bytes()[:8] == PNG_MAGIC
-    axes = saved[0].axes
+    axes = plate_gallery.plate_gallery_figure(images, scenes, reads, max_plates=3).axes
     assert len(axes) == 3 * 3
     titles = [ax.get_title() for ax in axes]
     assert plate.text in titles and all(t == "" for t in titles[1::3] + titles[2::3])
     with pytest.raises(ValueError, match="expected"):
-        charts.write_plate_gallery({"sharp": sharp[:1]}, scenes, {}, tmp_path / "bad.png")
+        plate_gallery.write_plate_gallery({"sharp": sharp[:1]}, scenes, {}, tmp_path / "bad.png")

@@ -25,13 +25,15 @@ def test_one_default_per_knob_and_it_is_the_suites_geometry(ideal_records):
     for knob in ("energy_fraction", "pupil_samples", "oversample"):
         (row,) = [r for r in records if r["knob"] == knob and r["default"]]
         assert (row["psf_size_px"], row["pupil_samples"], row["oversample"]) == (
-            default.psf_size_px, default.pupil_samples, default.oversample)
+            default.psf_size_px, default.pupil_samples, 0)  # 0: exact pixel integration
 
 
 def test_finer_pixel_integration_and_wider_support_converge_to_the_reference(ideal_records):
     _, records = ideal_records
-    over = sorted((r for r in records if r["knob"] == "oversample"), key=lambda r: r["value"])
+    over = sorted((r for r in records if r["knob"] == "oversample" and r["value"] > 0), key=lambda r: r["value"])
     assert all(a["psf_l1"] > b["psf_l1"] for a, b in zip(over, over[1:]))
+    (exact,) = [r for r in records if r["knob"] == "oversample" and r["value"] == 0]
+    assert exact["psf_l1"] < over[-1]["psf_l1"]  # the exact integral beats every midpoint rule
     energy = sorted((r for r in records if r["knob"] == "energy_fraction"), key=lambda r: r["value"])
     assert all(a["psf_size_px"] <= b["psf_size_px"] for a, b in zip(energy, energy[1:]))
     assert energy[-1]["image_psnr_db"] > energy[0]["image_psnr_db"] + 5

@@ -301,6 +301,8 @@ def test_two_runs_on_one_cache_both_complete_and_agree(shared_cache_runs):
 def test_results_with_failures_are_not_reused_by_a_later_run(tmp_path, monkeypatch):
     from benchmark import tasks
     from benchmark.planning import Task
+    from benchmark.profiles import get_profile
+    from benchmark.run_config import RunConfig
     from benchmark.schema import Row, RowError
 
     calls = []
@@ -313,9 +315,11 @@ def test_results_with_failures_are_not_reused_by_a_later_run(tmp_path, monkeypat
 
     monkeypatch.setitem(tasks._KINDS, "test-kind", body)
     task = Task("test-kind", 0)
-    assert tasks.execute(task, None, tmp_path).has_failures
-    assert not tasks.execute(task, None, tmp_path).has_failures  # computed again: now it works
-    assert not tasks.execute(task, None, tmp_path).has_failures and len(calls) == 2  # and then reused
+    # execute records each computed task's cost under the run's profile (benchmark.task_costs)
+    cfg = RunConfig(lenses=[], attacks=None, scenes="s", profile=get_profile("smoke"), seeds=[0], cache_dir=tmp_path)
+    assert tasks.execute(task, cfg, tmp_path).has_failures
+    assert not tasks.execute(task, cfg, tmp_path).has_failures  # computed again: now it works
+    assert not tasks.execute(task, cfg, tmp_path).has_failures and len(calls) == 2  # and then reused
 
 
 def test_corrupt_task_results_are_reported_and_rebuilt(shared_cache_runs, tmp_path):

@@ -3,7 +3,7 @@
 import json
 
 from benchmark import leaderboard_report
-from benchmark.leaderboard_report import utility_params
+from benchmark.charts.profiles import utility_params
 from benchmark.profiles import get_profile
 from benchmark.studies import utility_size
 

@@ -17,6 +17,7 @@ from attacks.networks import RED10
 from attacks.onnx_backend import InferenceEngine
 from attacks.restorer_training import RestorerBudget
 from benchmark.charts.restorers import restorer_points, write_restorer_speed_chart
+from benchmark.schema import migrate_legacy_row
 from benchmark.profiles import PROFILES
 
 ROUNDS = 3
@@ -55,17 +56,17 @@ def test_restorer_throughput_torch_vs_onnx(benchmark, make):
 
 
 def test_restorer_chart_has_one_point_per_lens_and_restorer(tmp_path):
-    rows = [
+    rows = [migrate_legacy_row({"profile": "smoke", "scenes": "synthetic", **row}) for row in [
         {"lens": "defocus", "attack": "wiener-known-psf", "psnr_db": 24.5, "images_per_s": 1.6,
          "threat_model": "lens-access", "seed": 0},
         {"lens": "defocus", "attack": "wiener-known-psf", "psnr_db": 25.5, "images_per_s": 2.4,
          "threat_model": "lens-access", "seed": 1},
         {"lens": "ideal", "attack": "nafnet-known-pairs", "psnr_db": 27.0, "images_per_s": 0.5,
          "threat_model": "known-pairs", "seed": 0},
-        {"lens": "ideal", "attack": "nafnet-known-pairs>lpdr", "plate_acc": 0.3, "images_per_s": 3.0},
-        {"lens": "sharp", "attack": "lpdr", "plate_acc": 0.4, "images_per_s": 3.0},
-        {"lens": "ideal", "attack": "lens", "images_per_s": 10.0},
-    ]
+        {"lens": "ideal", "attack": "nafnet-known-pairs>lpdr", "plate_acc": 0.3, "images_per_s": 3.0, "seed": 0},
+        {"lens": "sharp", "attack": "lpdr", "plate_acc": 0.4, "images_per_s": 3.0, "seed": 0},
+        {"lens": "ideal", "attack": "lens", "images_per_s": 10.0, "seed": 0},
+    ]]
     points = restorer_points(rows)
     assert points == {("defocus", "wiener-known-psf"): (2.0, 25.0, "lens-access"),
                       ("ideal", "nafnet-known-pairs"): (0.5, 27.0, "known-pairs")}

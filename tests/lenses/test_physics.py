@@ -4,9 +4,11 @@ import math
 
 import numpy as np
 import pytest
+import scipy.integrate
+import scipy.special
 import torch
 
-from lenses.optics import Geometry, PupilModel, mft_kernel, optical_constants
+from lenses.optics import Geometry, PupilModel, choose_geometry, mft_kernel, optical_constants
 from lenses.spec import parse_spec
 
 GREEN = 1
@@ -16,17 +18,17 @@ def spec(zernike=(0.0,) * 6, **optics):
     return parse_spec({"name": "t", "optics": optics, "mask": {"zernike_um": list(zernike)}})
 
 
-def intensity(s, geometry, coeffs=None):
+def intensity(s, geometry, coeffs=None, oversample=3):
     model = PupilModel(s, geometry)
     c = torch.tensor(coeffs if coeffs is not None else s.mask.zernike_um, dtype=torch.float64)
-    return model.sampled_intensity(c), model
+    return model.sampled_intensity(c, oversample), model
 
 
 def test_airy_first_zero_at_1_22_lambda_f_number():
     s = spec()
     c = optical_constants(s)
     # 9 pixels x 61 sub-samples: a 0.057 um grid along the axis through the centre.
-    inten, model = intensity(s, Geometry(pupil_samples=512, psf_size_px=9, oversample=61))
+    inten, model = intensity(s, Geometry(pupil_samples=512, psf_size_px=9), oversample=61)
     pitch_mm = s.sensor.pixel_pitch_um * 1e-3
     x = (np.arange(9 * 61) - (9 * 61) // 2) * pitch_mm / 61
     for ch in range(3):
@@ -41,6 +43,63 @@ def test_airy_first_zero_at_1_22_lambda_f_number():
         assert profile[i] < 1e-3 * profile.max()
 
 
+def airy_intensity(x_mm, y_mm, lambda_f_mm):
+    """In-focus Airy pattern with unit total energy, per mm^2: (pi / (4 (lambda F#)^2)) (2 J1(v) / v)^2,
+    v = pi r / (lambda F#) (the integral of (2 J1(v)/v)^2 over the plane is 4 (lambda F#)^2 / pi)."""
+    v = np.maximum(math.pi * np.hypot(x_mm, y_mm) / lambda_f_mm, 1e-12)
+    return (2 * scipy.special.j1(v) / v) ** 2 * math.pi / (4 * lambda_f_mm**2)
+
+
+def airy_pixel_energy(k, lambda_f_mm, pitch_mm, nodes=24):
+    """Energy of the Airy pattern in each of k x k pixels (centre pixel on the axis), (k, k): the
+    intensity integrated over each pixel square by nodes x nodes Gauss-Legendre quadrature."""
+    t, w = scipy.special.roots_legendre(nodes)
+    x = ((np.arange(k) - k // 2)[:, None] + t[None, :] / 2) * pitch_mm  # (k, nodes) per pixel
+    wx = np.broadcast_to(w * pitch_mm / 2, x.shape)
+    inten = airy_intensity(x.reshape(-1)[None, :], x.reshape(-1)[:, None], lambda_f_mm)  # rows y
+    weighted = inten * np.outer(wx.reshape(-1), wx.reshape(-1))
+    return weighted.reshape(k, nodes, k, nodes).sum(axis=(1, 3))
+
+
+def test_airy_reference_quadrature_matches_adaptive_integration():
+    """The closed-form reference itself: Gauss-Legendre pixel sums against scipy's adaptive dblquad."""
+    lambda_f_mm, pitch_mm = 550e-6 * 5.0, 3.45e-3
+    ref = airy_pixel_energy(3, lambda_f_mm, pitch_mm)
+    for (row, col) in ((1, 1), (1, 2), (2, 2)):
+        y0, x0 = (row - 1 - 0.5) * pitch_mm, (col - 1 - 0.5) * pitch_mm
+        exact, _ = scipy.integrate.dblquad(lambda y, x: airy_intensity(x, y, lambda_f_mm),
+                                           x0, x0 + pitch_mm, y0, y0 + pitch_mm, epsabs=1e-12)
+        assert ref[row, col] == pytest.approx(exact, rel=1e-9)
+
+
+def test_default_psf_matches_pixel_integrated_airy_within_one_percent():
+    """Issue 14 item 5: the in-focus ideal lens (F/5, 3.45 um pixels) at the suite's default geometry
+    against the closed-form pixel-integrated Airy pattern, every channel, relative L2 < 1 %."""
+    s = spec()
+    geometry, _ = choose_geometry(s)
+    pixels, total = PupilModel(s, geometry).pixel_energy(torch.zeros(6, dtype=torch.float64))
+    psf = (pixels.double() / total[:, None, None]).numpy()
+    o = s.optics
+    # The working F-number from the thin-lens equation, independently of lenses.optics.
+    sensor_distance_mm = 1 / (1 / o.focal_length_mm - 1 / (o.focus_distance_m * 1e3))
+    f_number = sensor_distance_mm / o.aperture_diameter_mm
+    k = geometry.psf_size_px
+    k_centre = k // 2
+    for ch, wavelength_nm in enumerate(o.wavelengths_nm):
+        ref = airy_pixel_energy(k, wavelength_nm * 1e-6 * f_number, s.sensor.pixel_pitch_um * 1e-3)
+        rel_l2 = np.linalg.norm(psf[ch] - ref) / np.linalg.norm(ref)
+        assert rel_l2 < 0.01, (wavelength_nm, rel_l2)
+        assert psf[ch, k_centre, k_centre] == pytest.approx(ref[k_centre, k_centre], rel=0.005)
+    # The test tells the models apart: summing 3 x 3 point samples per pixel (the suite's earlier
+    # default) puts too much energy in the centre pixel and fails it.
+    ss = 3
+    midpoint = PupilModel(s, geometry).sampled_intensity(torch.zeros(6, dtype=torch.float64), ss)
+    midpoint = (midpoint.reshape(3, k, ss, k, ss).sum(dim=(2, 4)) * (s.sensor.pixel_pitch_um * 1e-3 / ss) ** 2
+                / total[:, None, None]).numpy()
+    ref_green = airy_pixel_energy(k, o.wavelengths_nm[GREEN] * 1e-6 * f_number, s.sensor.pixel_pitch_um * 1e-3)
+    assert np.linalg.norm(midpoint[GREEN] - ref_green) / np.linalg.norm(ref_green) > 0.03
+
+
 @pytest.mark.parametrize("x_target", [0.5, 1.0, 1.5, 2.5])
 def test_defocus_strehl_is_sinc_squared(x_target):
     s0 = spec()
@@ -48,7 +107,7 @@ def test_defocus_strehl_is_sinc_squared(x_target):
     lam_um = c.wavelength_mm[GREEN] * 1e3
     c_opd_um = x_target * lam_um / (2 * math.sqrt(3) * math.pi)
     glass_um = c_opd_um / (c.index[GREEN] - 1)
-    geometry = Geometry(pupil_samples=512, psf_size_px=3, oversample=3)
+    geometry = Geometry(pupil_samples=512, psf_size_px=3)
     ideal, _ = intensity(s0, geometry)
     aberrated, _ = intensity(s0, geometry, coeffs=[0, 0, 0, glass_um, 0, 0])
     strehl = float(aberrated[GREEN, 4, 4] / ideal[GREEN, 4, 4])  # sub-sample (4, 4) is the optical axis
@@ -62,7 +121,7 @@ def test_optical_defocus_term_matches_z4_strehl():
     psi = c.defocus_rad[GREEN]
     c_opd = abs(psi) * c.wavelength_mm[GREEN] / (4 * math.sqrt(3) * math.pi)
     x = 2 * math.sqrt(3) * math.pi * c_opd / c.wavelength_mm[GREEN]
-    geometry = Geometry(pupil_samples=512, psf_size_px=3, oversample=3)
+    geometry = Geometry(pupil_samples=512, psf_size_px=3)
     ideal, _ = intensity(spec(), geometry)
     blurred, _ = intensity(s, geometry)
     # The on-axis field is the pupil integral whatever z_s is, so the ratio is the Strehl ratio.
@@ -78,7 +137,7 @@ def test_tilt_moves_centroid_by_4_c_opd_f_number(term, axis):
     coeffs = [0.0] * 6
     coeffs[term] = glass_um
     k = 81
-    model = PupilModel(s0, Geometry(pupil_samples=256, psf_size_px=k, oversample=3))
+    model = PupilModel(s0, Geometry(pupil_samples=256, psf_size_px=k))
     pixels, _ = model.pixel_energy(torch.tensor(coeffs, dtype=torch.float64))
     pitch_um = s0.sensor.pixel_pitch_um
     pos = (torch.arange(k, dtype=torch.float64) - k // 2) * pitch_um
@@ -93,7 +152,7 @@ def test_parseval_energy_fraction_grows_to_one():
     s = spec()
     fractions = []
     for k in (5, 21, 61, 161):
-        model = PupilModel(s, Geometry(pupil_samples=256, psf_size_px=k, oversample=3))
+        model = PupilModel(s, Geometry(pupil_samples=256, psf_size_px=k))
         _, frac = model(torch.zeros(6, dtype=torch.float64))
         fractions.append(frac.double())
     for a, b in zip(fractions, fractions[1:]):
@@ -103,7 +162,7 @@ def test_parseval_energy_fraction_grows_to_one():
 
 def test_mft_matches_zero_padded_fft():
     s = spec(zernike=(0.0, 0.3, -0.2, 0.5, 0.1, -0.4))
-    model = PupilModel(s, Geometry(pupil_samples=64, psf_size_px=3, oversample=3))
+    model = PupilModel(s, Geometry(pupil_samples=64, psf_size_px=3))
     u = model.pupil_field(torch.tensor(s.mask.zernike_um, dtype=torch.float64))[GREEN]
     n, pad = 64, 4
     m = n * pad

@@ -29,7 +29,7 @@ def with_(section, key, value):
     (with_("optics", "wavelengths_nm", [0.64, 0.55, 0.46]), r"wavelengths_nm\[0\].*in nm"),
     (with_("mask", "bounds_um", [[-1, 1]] * 5), r"mask\.bounds_um must be a list of 6"),
     (with_("mask", "bounds_um", [[-0.1, 0.1]] * 6), r"mask\.zernike_um\[3\] = 0.2 lies outside"),
-    (with_("simulation", "oversample", 1), r"simulation\.oversample must be >= 2"),
+    (with_("simulation", "max_psf_size_px", 34), r"simulation\.max_psf_size_px = 34 must be odd"),
     ({"name": "x", "mask": {"zernike_um": [0] * 6}, "lens": {}}, r"unknown key 'lens'"),
 ])
 def test_malformed_spec_names_the_field(raw, pattern):

@@ -6,7 +6,6 @@
 - the leaderboard's table and charts regenerate identically from the entries.
 """
 
-import json
 import os
 import shutil
 import subprocess
@@ -15,7 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from benchmark import leaderboard, leaderboard_report
+from benchmark import leaderboard_entries as leaderboard
+from benchmark import leaderboard_report
+from benchmark.leaderboard_entries import Entry
+from benchmark.schema import Row, read_results
 
 ENTRIES = leaderboard.LEADERBOARD / "entries"
 # Timing and throughput depend on the machine and its load, not on the code's numbers.
@@ -24,12 +26,12 @@ SKIP_SUFFIX = "_s_per_image"  # a reader's seconds per stage
 FAST_ATTACKS = ("identity", "wiener-known-psf", "richardson-lucy-known-psf", "lpdr-oracle")
 
 
-def tolerance(stats: dict) -> float:
+def tolerance(stats: leaderboard.Stat) -> float:
     """4 seed standard deviations, floored for metrics whose seeds happen to agree."""
-    return max(4.0 * stats["std"], 1e-6 + 1e-3 * abs(stats["mean"]))
+    return max(4.0 * stats.std, 1e-6 + 1e-3 * abs(stats.mean))
 
 
-def rerun(tmp_path: Path, profile: str, lenses: list[str], attacks: list[str], seed: int) -> list[dict]:
+def rerun(tmp_path: Path, profile: str, lenses: list[str], attacks: list[str], seed: int) -> list[Row]:
     cmd = [sys.executable, "-m", "benchmark", "run", "--profile", profile, "--seeds", str(seed), "--out",
            str(tmp_path / "run")]
     for lens in lenses:
@@ -39,32 +41,31 @@ def rerun(tmp_path: Path, profile: str, lenses: list[str], attacks: list[str], s
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=3600,
                           env={**os.environ, "PLB_CACHE": str(tmp_path / "cache")})
     assert proc.returncode == 0, proc.stderr[-3000:]
-    return json.loads((tmp_path / "run" / "results.json").read_text())["rows"]
+    return read_results(tmp_path / "run" / "results.json").rows
 
 
-def compare(entry: dict, rows: list[dict], seed: int, attacks: set[str] | None) -> int:
+def compare(entry: Entry, rows: list[Row], seed: int, attacks: set[str] | None) -> int:
     """Assert every re-measured metric of `rows` matches the entry's value for `seed`; return the count."""
     checked = 0
-    by_attack = {r["attack"]: r for r in entry["rows"]}
     for row in rows:
-        if row["lens"] != entry["lens"] or (attacks is not None and row["attack"].split(">")[0] not in attacks
-                                            and row["attack"] not in ("lens", "utility", "bound")):
+        if not row.ok or row.lens != entry.lens or (attacks is not None and row.attack.split(">")[0] not in attacks
+                                                    and row.kind not in ("lens", "utility", "bound")):
             continue
-        stored = by_attack[row["attack"]]
-        index = stored["seeds"].index(seed)
-        for name, stats in stored["metrics"].items():
-            if name in SKIP or name.endswith(SKIP_SUFFIX) or name not in row:
+        stored = entry.chain(row.attack)
+        index = stored.seeds.index(seed)
+        for name, stats in stored.metrics.items():
+            if name in SKIP or name.endswith(SKIP_SUFFIX) or name not in row.metrics:
                 continue
-            expected = stats["values"][index]
+            expected = stats.values[index]
             if expected is None:
                 continue
-            assert row[name] == pytest.approx(expected, abs=tolerance(stats)), (entry["lens"], row["attack"], name)
+            assert row.metrics[name] == pytest.approx(expected, abs=tolerance(stats)), (entry.lens, row.attack, name)
             checked += 1
     return checked
 
 
 def test_smoke_profile_reproduces_the_published_figures(tmp_path):
-    entries = {e["lens"]: e for e in leaderboard.load_entries() if e["profile"] == "smoke"}
+    entries = {e.lens: e for e in leaderboard.load_entries() if e.profile == "smoke"}
     assert {"ideal", "defocus", "sharp"} <= set(entries), "publish smoke entries: see leaderboard/README.md"
     rows = rerun(tmp_path, "smoke", ["ideal", "defocus"], list(FAST_ATTACKS), seed=0)
     checked = sum(compare(entries[lens], rows, 0, set(FAST_ATTACKS)) for lens in ("ideal", "defocus", "sharp"))
@@ -74,9 +75,9 @@ def test_smoke_profile_reproduces_the_published_figures(tmp_path):
 @pytest.mark.skipif(not os.environ.get("RUN_SLOW"), reason="re-runs the quick profile (minutes); set RUN_SLOW=1")
 @pytest.mark.parametrize("lens", [os.environ.get("RUN_SLOW_LENS", "defocus")])
 def test_quick_profile_entry_reproduces_exactly(tmp_path, lens):
-    entry = next(e for e in leaderboard.load_entries() if e["lens"] == lens and e["profile"] == "quick")
-    attacks = sorted({r["attack"].split(">")[0] for r in entry["rows"]} - {"lens", "utility", "bound"})
-    seed = entry["seeds"][0]
+    entry = next(e for e in leaderboard.load_entries() if e.lens == lens and e.profile == "quick")
+    attacks = sorted({c.attack.split(">")[0] for c in entry.chains() if c.kind not in ("lens", "utility", "bound")})
+    seed = entry.seeds[0]
     rows = rerun(tmp_path, "quick", [lens], attacks, seed)
     assert compare(entry, rows, seed, None) > 20
 
@@ -85,7 +86,7 @@ def test_table_and_charts_regenerate_identically(tmp_path):
     copy = tmp_path / "leaderboard"
     shutil.copytree(leaderboard.LEADERBOARD, copy)
     leaderboard_report.render(copy)
-    for path in [copy / "README.md", *sorted((copy / "charts").glob("*.png"))]:
+    for path in [copy / "README.md", copy / "index.html", *sorted((copy / "charts").glob("*.png"))]:
         published = leaderboard.LEADERBOARD / path.relative_to(copy)
         assert published.is_file(), f"{published} is not published; run python -m benchmark report"
         assert path.read_bytes() == published.read_bytes(), f"{published} differs from its entries"

@@ -17,9 +17,9 @@ single-process step on the same global batch, up to float reduction order:
   RNG (seeded alike on every rank by the loop) and keep their rows, so each sample gets the mask it
   gets in a single process; batch norm normalises by the global batch's statistics (a
   differentiable all-reduce of sums and sums of squares), so its running statistics agree too.
-- Optics: Adam steps on the mean over ranks of the coefficient gradient. MTAdam balances the means
-  over ranks of each term's gradient. The gradient penalty is the global batch's: G = dL_deb/dtheta
-  is averaged over ranks first, P = (||G|| - 1)^2, and each rank adds g_r . v (v = dP/dG, g_r its
+- Optics: every term's coefficient gradient is averaged over ranks (`mean`), so Adam steps on
+  the global gradient and MTAdam balances the global terms. The gradient penalty is the global
+  batch's: G = dL_deb/dtheta is averaged over ranks first, P = (||G|| / r - 1)^2 (r the reference norm, global), and each rank adds g_r . v (v = dP/dG, g_r its
   own estimate of G, still differentiable), whose gradient averaged over ranks is exactly dP/dtheta.
   Every rank then applies the same update to the same all-reduced gradient, so the coefficients
   stay bitwise identical without a broadcast.
@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import datetime
 import os
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
@@ -45,8 +45,7 @@ from torch.distributed import _functional_collectives as funcol  # differentiabl
 from torch.nn.parallel import DistributedDataParallel
 from transformers.models.segformer.modeling_segformer import SegformerDropPath
 
-from lenses.codesign.mtadam import MTAdam
-from lenses.codesign.trainer import SingleProcess
+from benchmark.codesign.replicas import SingleProcess
 from lenses.lens import Lens
 
 __all__ = ["DataParallel", "launched_by_torchrun", "session"]
@@ -190,19 +189,6 @@ def _globalise(module: nn.Module, layout: _Rows, group: Any) -> None:
             _globalise(child, layout, group)
 
 
-class _MeanTermsMTAdam(MTAdam):
-    """MTAdam balancing the means over ranks of each term's gradient (the global batch's term gradients)."""
-
-    def __init__(self, params: list[torch.Tensor], lr: float, mean: Callable[[torch.Tensor], torch.Tensor]):
-        super().__init__(params, lr=lr)
-        self._mean = mean
-
-    def _term_gradients(self, losses: Sequence[torch.Tensor],  # type: ignore[override]
-                        params: list[torch.Tensor]) -> list[Sequence[torch.Tensor | None]]:
-        grads = MTAdam._term_gradients(losses, params)
-        return [[None if g is None else self._mean(g) for g in term] for term in grads]
-
-
 class DataParallel(SingleProcess):
     """The co-design step spread over the ranks of the initialised default process group."""
 
@@ -251,14 +237,11 @@ class DataParallel(SingleProcess):
     def item(self, t: torch.Tensor) -> float:
         return float(self.mean(t))
 
-    def gradient_penalty(self, g: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def gradient_penalty(self, g: torch.Tensor, reference: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         mean = self.mean(g).requires_grad_()
-        penalty = (mean.norm() - 1.0) ** 2
+        penalty = (mean.norm() / reference - 1.0) ** 2
         (v,) = torch.autograd.grad(penalty, mean)
         return penalty.detach(), (g * v).sum()
-
-    def mtadam(self, params: list[torch.Tensor], lr: float) -> torch.optim.Optimizer:
-        return _MeanTermsMTAdam(params, lr, self.mean)
 
     def writer_first(self, fn: Callable[[], Any]) -> Any:
         result = fn() if self.is_writer else None

@@ -12,10 +12,10 @@ import torch
 import torch.distributed as dist
 import torch.multiprocessing as mp
 
+from benchmark.codesign.builtin import START_SPEC
+from benchmark.codesign.schemes import SCHEMES
+from benchmark.codesign.trainer import CoDesign
 from benchmark.profiles import PROFILES
-from lenses.codesign.builtin import START_SPEC
-from lenses.codesign.schemes import SCHEMES
-from lenses.codesign.trainer import CoDesign
 from lenses.spec import load_spec
 
 # test_codesign's tiny profile with two rows per rank: CPU kernels lay out a one-row activation
@@ -51,8 +51,8 @@ def _worker(rank: int, port: int, root: Path) -> None:
     os.environ.update(MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port))
     torch.set_num_threads(1)
     dist.init_process_group("gloo", rank=rank, world_size=WORLD)
-    from lenses.codesign import trainer
-    from lenses.codesign.distributed import DataParallel
+    from benchmark.codesign import trainer
+    from benchmark.codesign.distributed import DataParallel
     writes: list[str] = []
     for name in WRITERS:  # count every artifact write of this rank
         original = getattr(trainer, name)
@@ -60,9 +60,9 @@ def _worker(rank: int, port: int, root: Path) -> None:
     in_sync: list[bool] = []
     step = trainer.CoDesign._step
 
-    def checked_step(self, i, lens, seg, deb, *rest):
-        stats = step(self, i, lens, seg, deb, *rest)
-        state = torch.cat([lens.coefficients_um.detach(), _flat(seg), _flat(deb)])
+    def checked_step(self, i, run_state):
+        stats = step(self, i, run_state)
+        state = torch.cat([run_state.lens.coefficients_um.detach(), _flat(run_state.seg), _flat(run_state.deb)])
         gathered = [torch.empty_like(state) for _ in range(WORLD)]
         dist.all_gather(gathered, state)
         in_sync.append(all(torch.equal(g, gathered[0]) for g in gathered))
@@ -136,4 +136,4 @@ def test_only_rank_0_writes_and_resume_reads_its_checkpoint(ranks):
         assert [p.name for p in codesign.iterdir() if "staging" in p.name or p.suffix == ".pt"] == []
         (published,) = codesign.iterdir()
         assert {p.name for p in published.iterdir()} == {"lens.toml", "utility.safetensors", "adversary.safetensors",
-                                                         "record.json"}
+                                                         "record.json", "curves.jsonl", "curves.png", "tensorboard"}

@@ -90,17 +90,28 @@ class MTAdam(torch.optim.Optimizer):
             ValueError: no losses, a non-scalar loss, ``ranks`` of the wrong length, or a
                 number of terms different from the previous steps.
         """
-        n_terms = len(losses)
-        if n_terms == 0:
+        if len(losses) == 0:
             raise ValueError("MTAdam.step needs at least one loss term")
         if any(loss.numel() != 1 for loss in losses):
             raise ValueError(f"MTAdam losses must be scalars, got shapes {[tuple(loss.shape) for loss in losses]}")
-        ranks = [1.0] * n_terms if ranks is None else list(ranks)
-        if len(ranks) != n_terms:
-            raise ValueError(f"MTAdam got {n_terms} losses but {len(ranks)} ranks; give one rank per loss")
+        self._check_ranks(len(losses), ranks)
+        params = [p for group in self.param_groups for p in group["params"] if p.requires_grad]
+        self.step_gradients(self._term_gradients(losses, params), ranks)
 
+    def step_gradients(self, per_term: Sequence[Sequence[torch.Tensor | None]],
+                       ranks: Sequence[float] | None = None) -> None:
+        """The step of ``step`` from gradients already taken: ``per_term[i][k]`` is term i's
+        gradient of the k-th trainable parameter (in parameter-group order), None where the term
+        does not reach it. For callers that differentiate the terms themselves (the co-design
+        averages each term's gradient over data-parallel ranks first)."""
+        n_terms = len(per_term)
+        if n_terms == 0:
+            raise ValueError("MTAdam.step needs at least one loss term")
+        ranks = self._check_ranks(n_terms, ranks)
         pairs = [(p, group) for group in self.param_groups for p in group["params"] if p.requires_grad]
-        per_term = self._term_gradients(losses, [p for p, _ in pairs])
+        if any(len(term) != len(pairs) for term in per_term):
+            raise ValueError(f"MTAdam.step_gradients needs one gradient (or None) per trainable parameter "
+                             f"({len(pairs)}) for every term, got {[len(t) for t in per_term]}")
         with torch.no_grad():
             for k, (p, group) in enumerate(pairs):
                 grads = [term[k] for term in per_term]
@@ -108,6 +119,13 @@ class MTAdam(torch.optim.Optimizer):
                     continue
                 stacked = torch.stack([torch.zeros_like(p) if g is None else g for g in grads])
                 self._update(p, stacked, ranks, group)
+
+    @staticmethod
+    def _check_ranks(n_terms: int, ranks: Sequence[float] | None) -> list[float]:
+        ranks = [1.0] * n_terms if ranks is None else list(ranks)
+        if len(ranks) != n_terms:
+            raise ValueError(f"MTAdam got {n_terms} losses but {len(ranks)} ranks; give one rank per loss")
+        return ranks
 
     @staticmethod
     def _term_gradients(

@@ -10,8 +10,8 @@ from pathlib import Path
 from typing import Any
 
 from lenses.builtin import SPEC_DIR
-from lenses.codesign.schemes import SCHEMES
-from lenses.codesign.trainer import CoDesign, TrainedLens
+from benchmark.codesign.schemes import SCHEMES
+from benchmark.codesign.trainer import CoDesign, TrainedLens
 from lenses.lens import Lens
 from lenses.spec import load_spec
 
@@ -19,11 +19,11 @@ START_SPEC = SPEC_DIR / "codesign.toml"
 
 
 def attach(trained: TrainedLens) -> Lens:
-    """The trained lens with its networks as attributes (utility_net, adversary, training)."""
+    """The trained lens with its networks and record as attributes (utility_net, adversary, training_record)."""
     lens = trained.lens
     object.__setattr__(lens, "utility_net", trained.utility_net)
     object.__setattr__(lens, "adversary", trained.adversary)
-    object.__setattr__(lens, "training", trained.record)
+    object.__setattr__(lens, "training_record", trained.record)
     return lens
 
 
@@ -59,6 +59,10 @@ def os_d_mtadam(**kw: Any) -> Lens:
 
 def gp(**kw: Any) -> Lens:
     return codesigned("gp", **kw)
+
+
+def gp_literal(**kw: Any) -> Lens:
+    return codesigned("gp-literal", **kw)
 
 
 def os_info(**kw: Any) -> Lens:

@@ -6,7 +6,7 @@ import math
 import pytest
 import torch
 
-from lenses.codesign.mtadam import MTAdam
+from benchmark.codesign.mtadam import MTAdam
 
 A = torch.tensor([1.0, -2.0, 0.5], dtype=torch.float64)
 B = torch.tensor([3.0, 0.0, -1.0], dtype=torch.float64)

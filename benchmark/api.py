@@ -1,0 +1,446 @@
+"""The Python API: what `python -m benchmark run` does, callable from a script or a notebook.
+
+Example (README; tests/benchmark/test_api.py runs exactly these lines)::
+
+    import benchmark
+    print(benchmark.list_lenses(), benchmark.list_attacks())
+    results = benchmark.run(lenses=["gp", "ideal"], attacks=["wiener-known-psf", "lpdr-oracle"], profile="smoke")
+    table = results.table()  # pandas: one row per lens x attack x seed, metrics with 95 % intervals, status
+    print(table[["lens", "attack", "status", "psnr_db", "psnr_db_ci_low", "psnr_db_ci_high", "plate_acc"]].to_string())
+
+`run` validates every argument before any compute (errors name the argument and what would be
+valid), plans the tasks, executes them (here, or on Ray), and returns `Results`: the typed rows
+(`benchmark.schema.Row`), the settings they point at, and `table()`. With `out` it also writes
+results.json, table.md, table.csv, pictures and charts there, as the CLI does. `plan` is the dry
+run: which tasks are cached, which would be computed, and what they cost when last measured.
+
+Attackers may be registered names, 'path/file.py:Class' specs, or Python objects: an
+`attacks.Restorer` / `attacks.Reader` subclass or instance (see `benchmark.attacker_objects` for
+how they reach the tasks; an instance runs only with the local executor).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import logging
+import shutil
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import attacks
+import lenses
+from benchmark import attacker_objects, executors, runner, task_costs
+from benchmark.cache import cache_root
+from benchmark.planning import AttackerRef, plan as plan_tasks, run_directory
+from benchmark.profiles import Profile, get_profile
+from benchmark.provenance import git_commit
+from benchmark.run_config import RunConfig, training_scenes
+from benchmark.scenes import PLATE_FORMAT, SCENE_SETS, load_scenes, plate_entropy_bits
+from benchmark.schema import Row, read_results, write_results
+from benchmark.schema import Results as ResultsFile
+from benchmark.tasks import is_cached
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+__all__ = ["Plan", "PlannedTask", "Results", "list_attacks", "list_lenses", "list_scene_sets", "load_lens",
+           "plan", "run"]
+
+log = logging.getLogger(__name__)
+
+AttackerLike = str | type[attacks.Attack] | attacks.Attack
+# Identity columns of `Results.table()`, in order; metrics and their intervals follow.
+ID_COLUMNS = ("kind", "lens", "attack", "restorer", "reader", "seed", "profile", "scenes", "status", "threat_model",
+              "error_attacker", "error_stage", "error_message", "settings_hash")
+CI_LOW, CI_HIGH = "_ci_low", "_ci_high"
+
+
+# ---- discovery ------------------------------------------------------------------------------------
+
+def list_lenses() -> dict[str, str]:
+    """Registered lenses, name -> 'module:attr' (nothing is imported)."""
+    return lenses.available()
+
+
+def list_attacks() -> dict[str, str]:
+    """Registered attackers, name -> 'module:attr' (nothing is imported)."""
+    return attacks.available()
+
+
+def list_scene_sets() -> dict[str, str]:
+    """Scene sets, name -> description (`cityscapes` takes a path: 'cityscapes:PATH')."""
+    return dict(SCENE_SETS)
+
+
+def load_lens(name: str | Path, profile: str | Profile = "quick", seed: int = 0, device: str = "cpu",
+              scenes: str = "synthetic") -> lenses.Lens:
+    """A lens as a run would use it: a registered name or a .toml spec path.
+
+    A co-designed lens (e.g. "gp") is trained with `profile` and `seed` on `scenes`' training
+    set, or loaded from the cache (`PLB_CACHE`) when it was trained before; fixed lenses ignore
+    these. Returns a `lenses.Lens` on `device`: `lens.psf()` (3, K, K), `lens(x)` for scenes
+    x (B, 3, H, W) in [0, 1].
+    """
+    p = _profile(profile)
+    return lenses.load(name, profile=p, seed=seed, device=_device(device), cache_dir=cache_root(),
+                       scenes=training_scenes(scenes)).to(device)
+
+
+# ---- results --------------------------------------------------------------------------------------
+
+@dataclass
+class Results:
+    """What a run produced.
+
+    Attributes:
+        rows: One `benchmark.schema.Row` per lens x attack chain x seed (failed attackers included,
+            with status "failed" and their error).
+        settings: Settings hash -> the lens and attacker settings the rows point at.
+        meta: The run: profile settings, executor, wall time (s), and what the caller added.
+        out: The folder the outputs were written to, or None.
+        output: The run's other products (plate records, picture paths, lens info, bound curves);
+            None for results read from a file.
+    """
+
+    rows: list[Row]
+    settings: dict[str, dict[str, Any]] = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
+    out: Path | None = None
+    output: runner.RunOutput | None = None
+
+    @property
+    def failed(self) -> list[Row]:
+        """The rows with status "failed"."""
+        return [r for r in self.rows if not r.ok]
+
+    def table(self) -> pd.DataFrame:
+        """The rows as a pandas DataFrame, one row per lens x attack x seed.
+
+        Columns: `ID_COLUMNS` (kind, lens, attack, restorer, reader, seed, profile, scenes,
+        status, threat_model, the error of a failed row, settings_hash), then each metric in
+        the order first met (psnr_db in dB, ssim, plate_acc in [0, 1], fit_s in s, ...), a metric
+        with a 95 % interval followed by `<metric>_ci_low` and `<metric>_ci_high`. A row without
+        a metric has NaN there (a failed row has no metric at all).
+        """
+        import pandas as pd
+        metrics: dict[str, bool] = {}  # name -> has an interval somewhere; insertion-ordered
+        for r in self.rows:
+            for name in r.metrics:
+                metrics[name] = metrics.get(name, False) or name in r.intervals
+        columns = list(ID_COLUMNS)
+        for name, has_interval in metrics.items():
+            columns += [name, name + CI_LOW, name + CI_HIGH] if has_interval else [name]
+        records = []
+        for r in self.rows:
+            record: dict[str, Any] = {k: getattr(r, k) for k in ID_COLUMNS if not k.startswith("error_")}
+            error = r.error.to_json() if r.error is not None else {}
+            record.update({f"error_{k}": error.get(k) for k in ("attacker", "stage", "message")})
+            for name in metrics:
+                record[name] = r.metrics.get(name, float("nan"))
+                low, high = r.intervals.get(name, (float("nan"), float("nan")))
+                record[name + CI_LOW], record[name + CI_HIGH] = low, high
+            records.append(record)
+        return pd.DataFrame.from_records(records, columns=columns)
+
+    def write(self, path: Path) -> Path:
+        """Write the rows, settings and meta as a results.json (`benchmark.schema`)."""
+        return write_results(Path(path), ResultsFile(self.rows, self.settings, self.meta))
+
+    @classmethod
+    def read(cls, path: Path) -> Results:
+        """Results of an earlier run from its results.json (any schema version this code reads)."""
+        stored = read_results(Path(path))
+        return cls(stored.rows, stored.settings, stored.meta, out=Path(path).parent)
+
+
+# ---- running --------------------------------------------------------------------------------------
+
+def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = None, *,
+        profile: str | Profile = "quick", seeds: int | Sequence[int] = (0,), scenes: str = "synthetic",
+        device: str = "cpu", out: str | Path | None = None, executor: str = "local",
+        plate_format: str | None = None, frames: int = 30, budget_s: float | None = None,
+        meta: Mapping[str, Any] | None = None) -> Results:
+    """Benchmark `lenses` against `attacks`; the CLI's `run` with the same meanings.
+
+    Args:
+        lenses: Registered lens names or .toml spec paths.
+        attacks: Attackers: registered names, 'path/file.py:Class' specs, or attacks.Restorer /
+            attacks.Reader subclasses or instances. None: every attacker registered to run by default.
+        profile: "smoke", "quick" or "paper" (or a `Profile`).
+        seeds: Seeds to run, distinct integers.
+        scenes: "synthetic", "photos" or "cityscapes:PATH".
+        device: "cpu" or "cuda[:N]".
+        out: Folder for results.json, tables, pictures and charts (created); None writes none.
+        executor: "local" (this process), "ray" (a local Ray instance), "ray:auto" or "ray://HOST:PORT".
+        plate_format: Plate strings the privacy bound counts (L letter, D digit); None: the scenes'.
+        frames: Frames of a static plate for the video bound (>= 1).
+        budget_s: Wall-time budget (s) of each expensive step (an attacker's fit, restore or read;
+            the bound); a step past it gives a failed row. None: no budget.
+        meta: Extra facts stored in results.json's meta (the CLI stores its command line).
+
+    Returns:
+        `Results`; `Results.table()` is the DataFrame.
+
+    Raises:
+        ValueError (and LookupError subclasses for unknown names): a bad argument, before any compute.
+    """
+    git_commit()  # pinned now, as the code was imported: later commits do not re-stamp this run
+    cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames,
+                                budget_s)
+    folder, created = prepare_out(Path(out)) if out is not None else (None, False)
+    log.info("profile %s: %s", cfg.profile.name, cfg.profile.to_dict())
+    t0 = time.perf_counter()
+    try:
+        output = runner.run(cfg, executor=executor, selection=selection)
+    except BaseException:
+        if created and folder is not None and not any(folder.iterdir()):
+            folder.rmdir()
+        raise
+    run_meta = {**(meta or {}), "profile": cfg.profile.to_dict(), "executor": executor,
+                "wall_s": time.perf_counter() - t0}
+    results = Results(output.rows, output.settings, run_meta, folder, output)
+    if folder is not None:
+        write_run_outputs(folder, results)
+    return results
+
+
+def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike] | None, profile: str | Profile,
+               seeds: int | Sequence[int], scenes: str, device: str, executor: str, plate_format: str | None,
+               frames: int, budget_s: float | None) -> tuple[RunConfig, runner.Selection]:
+    """Check every argument (before any compute) and choose the attackers."""
+    p = _profile(profile)
+    names = [str(lens_names)] if isinstance(lens_names, (str, Path)) else [str(n) for n in lens_names]
+    if not names:
+        raise ValueError("lenses is empty; give at least one lens name or .toml spec (see benchmark.list_lenses())")
+    known = lenses.available()
+    for name in names:  # fail before any work on a typo or a bad spec field
+        if name.endswith(".toml") or Path(name).is_file():
+            lenses.load_spec(name)
+        elif name not in known:
+            lenses.load(name)
+    load_scenes(scenes, "val", 0, p.image_size, 0)  # validates the scene set name
+    plate_format = plate_format or PLATE_FORMAT
+    plate_entropy_bits(plate_format)  # validates the format before any work
+    if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
+        raise ValueError(f"frames must be an integer >= 1, got {frames!r}")
+    if budget_s is not None and (isinstance(budget_s, bool) or not isinstance(budget_s, (int, float))
+                                 or not budget_s > 0):
+        raise ValueError(f"budget_s must be None or a number of seconds > 0, got {budget_s!r}")
+    executors.get(executor)  # fails fast on a bad name or a missing Ray
+    selection = select_attackers(requested, remote=executor != "local")
+    cfg = RunConfig(lenses=names, attacks=[r.spec for r in selection.restorers + selection.readers],
+                    scenes=scenes, profile=p, seeds=_seeds(seeds), device=_device(device),
+                    plate_format=plate_format, frames=frames, budget_s=budget_s)
+    return cfg, selection
+
+
+def select_attackers(requested: Sequence[AttackerLike] | None, remote: bool) -> runner.Selection:
+    """The run's attackers from names, file specs and attacker objects, in the order given.
+
+    Names go through `runner.select_attackers` (an unknown name is an error, a plugin that fails
+    to load a failed row); an object whose constructor raises is a failed row too.
+
+    Raises:
+        attacks.DuplicatePluginError: two attackers share a name (results are keyed by it).
+        TypeError: an item is neither a str nor an attacker class or instance.
+        attacker_objects.AttackerTransportError: `remote` and an object cannot travel.
+    """
+    if requested is None:
+        return runner.select_attackers(None)
+    if isinstance(requested, (str, type, attacks.Attack)):
+        requested = [requested]
+    for item in requested:
+        if not (isinstance(item, str) or attacker_objects.is_attacker_object(item)):
+            raise TypeError(f"attacks: {item!r} is neither a name/'file.py:Class' spec nor an attacks.Restorer or "
+                            "attacks.Reader class or instance")
+    named = [item for item in requested if isinstance(item, str)]
+    by_spec: dict[str, AttackerRef] = {}
+    failures: list[attacks.PluginFailure] = []
+    kinds: dict[str, str] = {}
+    if named:
+        chosen = runner.select_attackers(named)
+        failures += chosen.failures
+        by_spec.update({r.spec: r for r in chosen.restorers + chosen.readers})
+        kinds.update({r.spec: "restorer" for r in chosen.restorers})
+    restorers: list[AttackerRef] = []
+    readers: list[AttackerRef] = []
+    sources: dict[str, str] = {}  # attacker name -> where it came from
+    for item in requested:
+        if isinstance(item, str):
+            ref = by_spec.pop(item, None)
+            if ref is None:  # failed to load (a failure row already), or named twice (as the CLI allows)
+                continue
+            is_restorer, origin = kinds.get(item) == "restorer", f"{item!r}"
+        else:
+            cls = item if isinstance(item, type) else type(item)
+            attacker_objects.check(item, remote)  # a misuse raises here
+            try:
+                ref, attacker = attacker_objects.reference(item, remote)
+            except Exception as exc:  # noqa: BLE001 - a constructor that raises is a failed row, as for a plugin
+                kind = "reader" if issubclass(cls, attacks.Reader) else "restorer"
+                failures.append(attacks.PluginFailure(getattr(cls, "name", cls.__qualname__),
+                                                      f"{type(exc).__name__}: {exc}", kind))
+                continue
+            is_restorer = isinstance(attacker, attacks.Restorer)
+            origin = f"{'class' if isinstance(item, type) else 'instance of'} {cls.__module__}.{cls.__qualname__}"
+        if ref.name in sources:
+            raise attacks.DuplicatePluginError(
+                f"attacker name {ref.name!r} is given twice: by {sources[ref.name]} and by {origin}; "
+                "rename one of them (results are keyed by the name)")
+        sources[ref.name] = origin
+        (restorers if is_restorer else readers).append(ref)
+    return runner.Selection(restorers, readers, failures)
+
+
+def prepare_out(path: Path | None) -> tuple[Path, bool]:
+    """The output folder (default runs/<date-time>), created and checked writable before any
+    compute; and whether it was created now (so a run that fails early can remove it again)."""
+    out = path or Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"out {str(out)!r} is a file; give a folder (it is created if missing)")
+    created = not out.exists()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise ValueError(f"out {str(out)!r} is not a writable folder ({exc.strerror or exc})") from None
+    return out, created
+
+
+def write_run_outputs(out: Path, results: Results) -> None:
+    """results.json (schema rows + their settings), tables, pictures and charts of a run."""
+    from benchmark import report
+    from benchmark.charts.run_charts import write_run_charts
+    results.write(out / "results.json")
+    output = results.output
+    assert output is not None, "only a run's own results carry its pictures and plate records"
+    for picture in output.pictures:
+        shutil.copyfile(picture, out / picture.name)
+    if output.plates:
+        report.write_plate_records(out, output.plates)
+    write_run_charts(out, results.rows, output.plates, output.bound_curves)
+    report.write_tables(out, results.rows)
+
+
+# ---- the dry run ----------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class PlannedTask:
+    """One task of a plan.
+
+    Attributes:
+        key: The task's key (its folder in the run's cache).
+        kind, seed, lens: What the task is (`benchmark.planning.Task`).
+        attackers: Names of the restorers and readers it runs.
+        cached: True when its result is in the cache (the run reads it), False when it would be computed.
+        recorded_s: For a cached task, the wall time (s) it took when computed, if recorded.
+        estimate: Measured cost of this work (`task_costs.Estimate`), from any run in the cache.
+    """
+
+    key: str
+    kind: str
+    seed: int
+    lens: str
+    attackers: tuple[str, ...]
+    cached: bool
+    recorded_s: float | None
+    estimate: task_costs.Estimate
+
+    @property
+    def state(self) -> str:
+        return "cached" if self.cached else "compute"
+
+
+@dataclass
+class Plan:
+    """The tasks a run would execute, in order, with their cache state and measured cost."""
+
+    tasks: list[PlannedTask]
+    directory: Path           # the run's folder in the cache
+    profile: str
+    failures: list[attacks.PluginFailure] = field(default_factory=list)  # attackers that did not load
+
+    def render(self) -> str:
+        """The plan as text: one line per task (key, cached/compute, cost), then a summary."""
+        width = max([len(t.key) for t in self.tasks] + [4])
+        lines = [f"dry run: {len(self.tasks)} tasks, profile {self.profile}, task results in {self.directory}",
+                 f"  {'task':<{width}}  {'state':<8}  cost"]
+        for t in self.tasks:
+            if t.cached:
+                cost = f"{t.recorded_s:.1f} s when computed" if t.recorded_s is not None else "not recorded"
+            else:
+                cost = t.estimate.text()
+            lines.append(f"  {t.key:<{width}}  {t.state:<8}  {cost}")
+        todo = [t for t in self.tasks if not t.cached]
+        known = [t.estimate.seconds for t in todo if t.estimate.seconds is not None]
+        summary = f"{len(self.tasks) - len(todo)} cached, {len(todo)} to compute"
+        if todo:
+            summary += f"; measured estimate {sum(known):.1f} s for {len(known)} of them"
+            if len(known) < len(todo):
+                summary += f", {len(todo) - len(known)} unknown"
+        lines.append(summary)
+        lines += [f"attacker {f.name!r} does not load and would give failed rows: {f.error}" for f in self.failures]
+        return "\n".join(lines)
+
+    def table(self) -> pd.DataFrame:
+        """The plan as a DataFrame: key, kind, seed, lens, attackers, state, recorded_s, estimate_s, n_measured."""
+        import pandas as pd
+        return pd.DataFrame.from_records(
+            [{"key": t.key, "kind": t.kind, "seed": t.seed, "lens": t.lens, "attackers": ",".join(t.attackers),
+              "state": t.state, "recorded_s": t.recorded_s, "estimate_s": t.estimate.seconds,
+              "n_measured": t.estimate.n} for t in self.tasks])
+
+
+def plan(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = None, *,
+         profile: str | Profile = "quick", seeds: int | Sequence[int] = (0,), scenes: str = "synthetic",
+         device: str = "cpu", executor: str = "local", plate_format: str | None = None,
+         frames: int = 30, budget_s: float | None = None) -> Plan:
+    """The dry run of `run` with the same arguments: its tasks, which are cached, what each costs.
+
+    Computes nothing and writes nothing (the attackers are constructed, to know their kinds).
+    A task's cost is the median wall time measured for the same work (kind, lens, attackers,
+    profile settings, scenes, device; any seed) in the cache, or unknown.
+    """
+    cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames,
+                                budget_s)
+    directory = run_directory(cfg, selection.restorers, selection.readers)
+    measured = task_costs.measurements(cfg.cache_dir)
+    planned = []
+    for task in plan_tasks(cfg, selection.restorers, selection.readers):
+        cached = is_cached(directory, task)
+        planned.append(PlannedTask(task.key, task.kind, task.seed, task.lens,
+                                   tuple(r.name for r in task.restorers + task.readers), cached,
+                                   task_costs.recorded(directory / task.key) if cached else None,
+                                   task_costs.estimate(task, cfg, measured)))
+    return Plan(planned, directory, cfg.profile.name, selection.failures)
+
+
+# ---- argument checks ------------------------------------------------------------------------------
+
+def _profile(profile: str | Profile) -> Profile:
+    return profile if isinstance(profile, Profile) else get_profile(profile)
+
+
+def _seeds(seeds: int | Sequence[int]) -> list[int]:
+    values = [seeds] if isinstance(seeds, int) else list(seeds)
+    if not values or any(isinstance(s, bool) or not isinstance(s, int) for s in values):
+        raise ValueError(f"seeds must be one or more integers like [0, 1, 2], got {seeds!r}")
+    if len(set(values)) != len(values):
+        raise ValueError(f"seeds lists a seed twice: {seeds!r}")
+    return values
+
+
+def _device(device: str) -> str:
+    import torch
+    if device == "cpu":
+        return device
+    if device.startswith("cuda"):
+        if not torch.cuda.is_available():
+            raise ValueError("device cuda was asked for but torch sees no CUDA device; use device='cpu'")
+        return device
+    raise ValueError(f"device must be cpu or cuda[:N], got {device!r}")

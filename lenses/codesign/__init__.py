@@ -1,5 +1,0 @@
-"""Co-design of the lens with the utility network and the deblurring adversary."""
-
-from lenses.codesign.mtadam import MTAdam
-
-__all__ = ["MTAdam"]
