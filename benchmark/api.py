@@ -86,7 +86,7 @@ def load_lens(name: str | Path, profile: str | Profile = "quick", seed: int = 0,
     x (B, 3, H, W) in [0, 1].
     """
     p = _profile(profile)
-    return lenses.load(name, profile=p, seed=seed, device=_device(device), cache_dir=cache_root(),
+    return lenses.load(name, profile=p, seed=seed, device=check_device(device), cache_dir=cache_root(),
                        scenes=training_scenes(scenes)).to(device)
 
 
@@ -233,7 +233,7 @@ def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike
     executors.get(executor)  # fails fast on a bad name or a missing Ray
     selection = select_attackers(requested, remote=executor != "local")
     cfg = RunConfig(lenses=names, attacks=[r.spec for r in selection.restorers + selection.readers],
-                    scenes=scenes, profile=p, seeds=_seeds(seeds), device=_device(device),
+                    scenes=scenes, profile=p, seeds=_seeds(seeds), device=check_device(device),
                     plate_format=plate_format, frames=frames, budget_s=budget_s)
     return cfg, selection
 
@@ -437,12 +437,13 @@ def _seeds(seeds: int | Sequence[int]) -> list[int]:
     return values
 
 
-def _device(device: str) -> str:
+def check_device(device: str) -> str:
+    """`device` when torch can use it ("cpu", "cuda", "cuda:N"); else ValueError saying what is valid."""
     import torch
     if device == "cpu":
         return device
     if device.startswith("cuda"):
         if not torch.cuda.is_available():
-            raise ValueError("device cuda was asked for but torch sees no CUDA device; use device='cpu'")
+            raise ValueError("device cuda was asked for but torch sees no CUDA device; use device cpu")
         return device
     raise ValueError(f"device must be cpu or cuda[:N], got {device!r}")

@@ -39,14 +39,11 @@ def _budget(text: str) -> float:
 
 
 def _device(text: str) -> str:
-    import torch
-    if text == "cpu":
-        return text
-    if text.startswith("cuda"):
-        if not torch.cuda.is_available():
-            raise argparse.ArgumentTypeError("--device cuda was asked for but torch sees no CUDA device; use --device cpu")
-        return text
-    raise argparse.ArgumentTypeError(f"--device must be cpu or cuda[:N], got {text!r}")
+    from benchmark.api import check_device
+    try:
+        return check_device(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--{exc}") from None
 
 
 def build_parser() -> argparse.ArgumentParser:
