@@ -63,7 +63,8 @@ def cache(tmp_path_factory):
 def readme_example() -> str:
     """The example of benchmark.api's docstring, dedented: the text the README shows."""
     doc = api.__doc__
-    block = doc[doc.index("::\n\n") + 3:doc.index("\n\n", doc.index("::\n\n") + 3)]
+    start = doc.index("::\n\n") + len("::\n\n")
+    block = doc[start:doc.index("\n\n", start)]
     return "\n".join(line[4:] for line in block.splitlines()) + "\n"
 
 
