@@ -76,6 +76,8 @@ class IdealObserverReader(Reader):
     def fit(self, ctx: FitContext) -> None:
         """Take the lens's PSF, gain and sensor constants; the plate format from ctx.extras['plate_format']."""
         lens = ctx.lens
+        if lens is None:  # skip_reason says so; fit may be called without asking it
+            raise ValueError(self.skip_reason(ctx))
         sensor = lens.spec.sensor
         with torch.no_grad():
             psf = lens.psf().detach().to(torch.float64).cpu()

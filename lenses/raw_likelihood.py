@@ -71,7 +71,7 @@ def draw_statistics(mean_e: torch.Tensor, read_noise_e: float, frames: int,
     if frames > 1:  # sum of squared deviations ~ var chi2_{T-1} = var 2 Gamma((T - 1) / 2)
         squared_deviations = var * 2.0 * rng.standard_gamma((frames - 1) / 2, mean.shape, dtype=np.float32)
     else:
-        squared_deviations = 0.0
+        squared_deviations = np.zeros_like(ybar)
     return torch.from_numpy(frames * ybar), torch.from_numpy(squared_deviations + frames * ybar**2)
 
 
