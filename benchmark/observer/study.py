@@ -13,6 +13,7 @@ Writes leaderboard/studies/ideal_observer.json and its chart leaderboard/charts/
 from __future__ import annotations
 
 import json
+import logging
 import time
 from pathlib import Path
 
@@ -24,6 +25,8 @@ FRAMES = (1, 30)
 DEPTH_LENSES = ("ideal", "defocus", "os-d-1000", "gp")
 EPS = 0.05
 REPO = Path(__file__).resolve().parents[2]
+
+log = logging.getLogger(__name__)
 
 
 def quick_lens_specs(entries_dir: Path = REPO / "leaderboard" / "entries") -> dict[str, dict]:
@@ -77,7 +80,7 @@ def run_study(out_json: Path = REPO / "leaderboard" / "studies" / "ideal_observe
             entry["at_own_distance"] = {"seconds": time.perf_counter() - t0,
                                         **{f"t{c.frames}": summary(c) for c in deep}}
         record["lenses"][name] = entry
-        print(f"{name}: {entry['seconds']:.0f} s, W5 plate T=1 {entry['t1']['w5_plate_px']} px", flush=True)
+        log.info("%s: %.0f s, W5 plate T=1 %s px", name, entry["seconds"], entry["t1"]["w5_plate_px"])
         out_json.parent.mkdir(parents=True, exist_ok=True)
         out_json.write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")  # after each lens: resumable by eye
     write_chart(record, out_png)

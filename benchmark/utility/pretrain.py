@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import logging
 import json
 import math
 import os
@@ -48,6 +49,8 @@ FINAL_LR_FRACTION = 0.01     # the cosine decays to this fraction of the peak le
 WEIGHT_DECAY = 0.01
 RARE_FRACTION = 0.5          # crops centred on a pixel of a uniformly drawn class
 CHECK_SCENES = 2             # val scenes of the small regression check recorded for the test
+
+log = logging.getLogger(__name__)
 
 
 class PretrainDivergedError(RuntimeError):
@@ -154,8 +157,7 @@ def train(profile: Any, seed: int, device: str, cache_dir: Path, scene_set: str 
         net.load_state_dict(saved.pop("net"))
         opt.load_state_dict(saved.pop("opt"))
         state.update(saved)
-        if progress:
-            print(f"resuming the clean utility pre-training at step {state['step']} from {checkpoint_path}")
+        log.info("resuming the clean utility pre-training at step %d from %s", state["step"], checkpoint_path)
     t0 = time.perf_counter()
     train_scenes = load_scenes(scene_set, "train", profile.pretrain_scenes, profile.image_size, seed)
     sampler = RareClassCropSampler(train_scenes, profile.pretrain_crop, profile.pretrain_batch, seed, RARE_FRACTION)
