@@ -20,6 +20,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 import torch
+from tqdm.auto import tqdm
 from safetensors import SafetensorError
 from safetensors.torch import load as load_safetensors
 from safetensors.torch import save as save_safetensors
@@ -159,7 +160,8 @@ def train_restorer(model: nn.Module, next_batch: Callable[[torch.Generator], tup
     generator = torch.Generator().manual_seed(seed)
     losses = []
     t0 = time.perf_counter()
-    for step in range(steps):
+    bar = tqdm(range(steps), desc="restorer fit", unit="step", leave=False)
+    for step in bar:
         inp, target = next_batch(generator)
         loss = negative_psnr(model(inp.to(device)), target.to(device))
         optimizer.zero_grad(set_to_none=True)
@@ -168,6 +170,7 @@ def train_restorer(model: nn.Module, next_batch: Callable[[torch.Generator], tup
         optimizer.step()
         schedule.step()
         losses.append(loss.item())
+        bar.set_postfix(psnr_db=f"{-losses[-1]:.2f}")
         if checkpoint is not None:
             checkpoint(step + 1, model)
             model.train()
