@@ -56,7 +56,9 @@ def test_a_second_run_loads_the_fit_instead_of_refitting(two_runs):
     assert trained_second == 0
     fitted = [r.metrics["psnr_db"] for r in _rows(first, "nafnet-known-pairs")]
     loaded = [r.metrics["psnr_db"] for r in _rows(second, "nafnet-known-pairs")]
-    assert fitted == loaded  # the same weights restore the same images
+    # The same weights restore the same images; the runs' float reductions may differ in the last
+    # bits (seen once in a full-suite run: 18.451579927 against 18.451579932 dB).
+    assert loaded == pytest.approx(fitted, rel=1e-7, abs=0)
 
 
 def test_the_profile_lists_every_computed_task_with_its_stages(two_runs):
