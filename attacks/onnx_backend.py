@@ -1,12 +1,13 @@
-"""Fast inference for restorer networks: ONNX Runtime on the CPU, with the torch path kept.
+"""Fast inference for image networks: ONNX Runtime on the CPU, with the torch path kept.
 
 ``torch.onnx.export(..., dynamo=False)`` (the TorchScript exporter) is used: with torch 2.14
 the default dynamo exporter needs ``onnxscript``, which is not installed, while the TorchScript
-exporter works offline and exports NAFNet and RED10 with dynamic batch and image size.
+exporter works offline and exports NAFNet, RED10 and SegFormer with dynamic batch and image size.
 On 2 CPU cores ONNX Runtime runs the quick-profile NAFNet 1.8x (RED10 1.7x) as fast as eager torch
-at 512 x 1024 (tests/benchmarks/test_restorer_speed.py), but that is a property of the
-machine, the network and the image size, so ``backend="auto"`` measures both once and keeps
-the faster.
+at 512 x 1024 (tests/benchmarks/test_restorer_speed.py), and SegFormer-B0 about 1.5x on the
+evaluation's 256 x 256 windows in batches of 8 (tests/benchmarks/test_segformer_speed.py), but
+that is a property of the machine, the network and the image size, so ``backend="auto"`` measures
+both once and keeps the faster.
 """
 
 from __future__ import annotations
@@ -15,17 +16,22 @@ import io
 import logging
 import time
 import warnings
-from collections.abc import Callable
-from typing import Literal
+from collections.abc import Callable, Iterator
+from typing import Any, Literal
 
 import torch
 from torch import Tensor, nn
 
-__all__ = ["BACKENDS", "Backend", "InferenceEngine", "OnnxModel", "check_backend", "export_onnx"]
+__all__ = ["BACKENDS", "DEFAULT_BATCH_PIXELS", "Backend", "InferenceEngine", "OnnxModel", "check_backend",
+           "export_onnx"]
 
 Backend = Literal["auto", "torch", "onnx"]
 BACKENDS: tuple[str, ...] = ("auto", "torch", "onnx")
 _OPSET = 17
+# Pixels per network call: 4 images of 512 x 1024. On 2 cores the quick NAFNet ran 0.32 images/s one
+# image at a time and 0.64 images/s four at a time (ONNX Runtime; RED10 the same either way), at
+# 2.8 GB peak resident memory; a batch of 8 at that size would hold several GiB of activations.
+DEFAULT_BATCH_PIXELS = 4 * 512 * 1024
 
 log = logging.getLogger(__name__)
 
@@ -38,14 +44,15 @@ def check_backend(backend: str) -> str:
 
 
 def export_onnx(model: nn.Module, example: Tensor) -> bytes:
-    """Serialize ``model`` (image (B, C, H, W) -> image) to ONNX with dynamic B, H, W.
+    """Serialize ``model`` (image (B, C, H, W) -> map (B, C', H, W)) to ONNX with dynamic B, H, W.
 
     Args:
-        model: A module in eval mode, on the CPU.
+        model: A module in eval mode, on the CPU, whose output is one (B, C', H, W) tensor at the
+            input's size (a restored image, or per-pixel logits).
         example: A CPU input of the right channel count used to trace the graph.
 
     Returns:
-        The ONNX model as bytes (opset 17).
+        The ONNX model as bytes (opset 17), input "image", output "output".
     """
     buffer = io.BytesIO()
     dynamic = {0: "batch", 2: "height", 3: "width"}
@@ -54,14 +61,14 @@ def export_onnx(model: nn.Module, example: Tensor) -> bytes:
         warnings.simplefilter("ignore")
         torch.onnx.export(
             model, (example,), buffer, dynamo=False, opset_version=_OPSET,
-            input_names=["image"], output_names=["restored"],
-            dynamic_axes={"image": dynamic, "restored": dynamic},
+            input_names=["image"], output_names=["output"],
+            dynamic_axes={"image": dynamic, "output": dynamic},
         )
     return buffer.getvalue()
 
 
 class OnnxModel:
-    """An ONNX image-to-image model run by ONNX Runtime's CPU provider.
+    """An ONNX image-to-map model run by ONNX Runtime's CPU provider.
 
     Args:
         onnx_bytes: Model from ``export_onnx``.
@@ -77,48 +84,65 @@ class OnnxModel:
         options.inter_op_num_threads = 1
         options.log_severity_level = 3
         self._session = ort.InferenceSession(onnx_bytes, options, providers=["CPUExecutionProvider"])
+        self._input = self._session.get_inputs()[0].name
 
     def __call__(self, x: Tensor) -> Tensor:
-        """(B, C, H, W) float32 -> (B, C, H, W) float32 on ``x``'s device."""
-        out = self._session.run(None, {"image": x.detach().cpu().float().contiguous().numpy()})[0]
+        """(B, C, H, W) float32 -> (B, C', H, W) float32 on ``x``'s device."""
+        out = self._session.run(None, {self._input: x.detach().cpu().float().contiguous().numpy()})[0]
         return torch.from_numpy(out).to(device=x.device, dtype=x.dtype)
 
 
 class InferenceEngine:
-    """Runs a restorer network through torch or ONNX Runtime, one image at a time.
-
-    One image at a time bounds peak memory at full resolution (a batch of 8 at 512 x 1024
-    would hold several GiB of NAFNet activations).
+    """Runs an image network through torch or ONNX Runtime, in batches bounded by pixel count.
 
     Args:
-        model: The network, image (B, C, H, W) -> image; put in eval mode, kept on its device.
+        model: The network, image (B, C, H, W) -> (B, C', H, W); put in eval mode, kept on its device.
         backend: "torch", "onnx" or "auto". "auto" on a CPU exports to ONNX now and, on the
-            first call, times both backends on the first image (after a warm-up run each) and
-            keeps the faster for good; on another device, or if the export fails, it uses torch.
-            The first real image, not a small probe, decides: on 2 cores the quick NAFNet ties
+            first call, times both backends on its first image (after a warm-up run each) and
+            keeps the faster for good; on another device, or if the export fails, it uses torch
+            (the reason is logged and kept in ``fallback_reason``).
+            The first real batch, not a small probe, decides: on 2 cores the quick NAFNet ties
             at 256 x 256 but ONNX Runtime is 1.8x faster at 512 x 1024.
         export_hw: (H, W) of the example image the ONNX graph is traced with (axes are dynamic).
+        exporter: Returns the ONNX bytes of ``model`` (e.g. from a cache, exporting on a miss);
+            default ``export_onnx`` on an example of ``export_hw``.
+        batch_pixels: Images per network call are as many as fit in this many pixels (at least
+            one), which bounds peak memory at full resolution.
+        fallback: With backend "onnx": if the export fails, use torch (logging why) instead of
+            raising. "auto" always falls back.
 
     Attributes:
         backend: The backend in use, "torch" or "onnx" ("auto" until the first call decides).
         timings_s: Seconds for the first image per backend, once "auto" has timed them.
+        fallback_reason: Why ONNX Runtime is not used although asked for, else None.
     """
 
-    def __init__(self, model: nn.Module, backend: str = "auto", export_hw: tuple[int, int] = (64, 64)) -> None:
+    def __init__(self, model: nn.Module, backend: str = "auto", export_hw: tuple[int, int] = (64, 64),
+                 exporter: Callable[[], bytes] | None = None, batch_pixels: int = DEFAULT_BATCH_PIXELS,
+                 fallback: bool = False) -> None:
         check_backend(backend)
+        if batch_pixels < 1:
+            raise ValueError(f"batch_pixels must be >= 1, got {batch_pixels}")
         self.model = model.eval()
+        self.requested = backend
+        self.batch_pixels = batch_pixels
         self.timings_s: dict[str, float] = {}
+        self.fallback_reason: str | None = None
         self._onnx: OnnxModel | None = None
         on_cpu = all(p.device.type == "cpu" for p in model.parameters())
         if backend == "onnx" and not on_cpu:
             raise ValueError("backend='onnx' runs on the CPU; move the model to the CPU or use 'torch'")
+        if backend == "auto" and not on_cpu:
+            self.fallback_reason = "the model is not on the CPU"
         if backend == "onnx" or (backend == "auto" and on_cpu):
+            export = exporter or (lambda: export_onnx(self.model, torch.rand(1, _channels(model), *export_hw)))
             try:
-                self._onnx = OnnxModel(export_onnx(self.model, torch.rand(1, _channels(model), *export_hw)))
-            except Exception as exc:  # noqa: BLE001 - auto falls back to the always-available path
-                if backend == "onnx":
+                self._onnx = OnnxModel(export())
+            except Exception as exc:  # noqa: BLE001 - fall back to the always-available path
+                if backend == "onnx" and not fallback:
                     raise
-                log.warning("ONNX export failed (%s: %s); restoring with torch", type(exc).__name__, exc)
+                self.fallback_reason = f"ONNX export failed ({type(exc).__name__}: {exc})"
+                log.warning("%s; running %s with torch", self.fallback_reason, type(model).__name__)
         self.backend = "torch" if self._onnx is None else backend
 
     @torch.no_grad()
@@ -134,14 +158,25 @@ class InferenceEngine:
         self.backend = min(self.timings_s, key=self.timings_s.__getitem__)
         log.info("inference backend %s (seconds per image: %s)", self.backend, self.timings_s)
 
+    def batches(self, x: Tensor) -> Iterator[Tensor]:
+        """Consecutive slices of ``x`` (B, C, H, W) of at most ``batch_pixels`` pixels (at least one image)."""
+        size = max(1, self.batch_pixels // max(1, x.shape[-2] * x.shape[-1]))
+        for start in range(0, x.shape[0], size):
+            yield x[start:start + size]
+
     def __call__(self, x: Tensor) -> Tensor:
         """Network output for ``x`` (B, C, H, W), unclamped, on ``x``'s device and dtype."""
         device = next(self.model.parameters()).device
-        images = [image[None].to(device=device, dtype=torch.float32) for image in x]
-        if self.backend == "auto" and images:
-            self._choose(images[0])
+        chunks = [chunk.to(device=device, dtype=torch.float32) for chunk in self.batches(x)]
+        if self.backend == "auto" and chunks:
+            self._choose(chunks[0][:1])
         run = self._run()
-        return torch.cat([run(image) for image in images]).to(device=x.device, dtype=x.dtype)
+        return torch.cat([run(chunk) for chunk in chunks]).to(device=x.device, dtype=x.dtype)
+
+    def describe(self) -> dict[str, Any]:
+        """What a result row records: requested and used backend, the timings that chose it, any fallback."""
+        return {"requested": self.requested, "backend": self.backend, "timings_s": dict(self.timings_s),
+                "fallback_reason": self.fallback_reason, "batch_pixels": self.batch_pixels}
 
 
 def _channels(model: nn.Module) -> int:

@@ -8,6 +8,8 @@ ignored; a class absent from both the ground truth and the predictions is left o
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import torch
 
@@ -44,11 +46,17 @@ def window_for(image_size: tuple[int, int], crop: tuple[int, int]) -> tuple[tupl
 
 @torch.no_grad()
 def predict(net: torch.nn.Module, images: torch.Tensor, window: tuple[int, int], stride: tuple[int, int],
-            batch_size: int = 4, device: str = "cpu") -> torch.Tensor:
-    """Train-id predictions (N, H, W) uint8 by sliding-window inference at full resolution."""
+            batch_size: int = 4, device: str = "cpu",
+            logits: Callable[[torch.Tensor], torch.Tensor] | None = None) -> torch.Tensor:
+    """Train-id predictions (N, H, W) uint8 by sliding-window inference at full resolution.
+
+    ``batch_size`` images go through each window position together; ``logits`` computes a batch of
+    windows' full-size logits (default: ``net`` with torch; see ``sliding_window_logits``).
+    """
     net.eval()
     out = []
     for start in range(0, images.shape[0], batch_size):
-        logits = sliding_window_logits(net, images[start:start + batch_size].to(device), window=window, stride=stride)
-        out.append(logits.argmax(1).to(torch.uint8).cpu())
+        averaged = sliding_window_logits(net, images[start:start + batch_size].to(device), window=window,
+                                         stride=stride, logits=logits)
+        out.append(averaged.argmax(1).to(torch.uint8).cpu())
     return torch.cat(out)

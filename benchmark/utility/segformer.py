@@ -14,7 +14,7 @@ import re
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
 
-from collections.abc import Mapping  # noqa: E402
+from collections.abc import Callable, Mapping  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import torch  # noqa: E402
@@ -213,6 +213,7 @@ def sliding_window_logits(
     *,
     window: tuple[int, int],
     stride: tuple[int, int],
+    logits: Callable[[torch.Tensor], torch.Tensor] | None = None,
 ) -> torch.Tensor:
     """Full-resolution logits from overlapping windows, as SegFormer's sliding inference.
 
@@ -227,6 +228,9 @@ def sliding_window_logits(
         image: (B, 3, H, W) RGB in [0, 1].
         window: (height, width) of a window in pixels.
         stride: (vertical, horizontal) step between windows in pixels, at most the window.
+        logits: full-size logits of a batch of windows (B, 3, h, w) -> (B, num_labels, h, w);
+            default :func:`segment_logits` with ``model`` (an ONNX Runtime engine of the same
+            model, :mod:`benchmark.utility.segformer_onnx`, gives the same within 1e-4).
 
     Returns:
         (B, num_labels, H, W) averaged logits.
@@ -234,6 +238,7 @@ def sliding_window_logits(
     (win_h, win_w), (step_h, step_w) = window, stride
     if not (0 < step_h <= win_h and 0 < step_w <= win_w):
         raise ValueError(f"stride {stride} must be positive and at most the window {window}, or pixels are skipped")
+    window_logits = logits or (lambda crop: segment_logits(model, crop))
     b, _, h, w = image.shape
     total = image.new_zeros(b, model.config.num_labels, h, w)
     count = image.new_zeros(1, 1, h, w)
@@ -243,6 +248,6 @@ def sliding_window_logits(
             # In-place add into the window's slice: autograd records it (copy-slices), and the sum is
             # bit-identical to padding every window to the full image, without a full-size tensor
             # per window (B0 on 8 x 512 x 1024 images, 256 px windows: 25 s instead of 35 s, 2 busy cores).
-            total[:, :, y:y2, x:x2] += segment_logits(model, image[:, :, y:y2, x:x2])
+            total[:, :, y:y2, x:x2] += window_logits(image[:, :, y:y2, x:x2])
             count[:, :, y:y2, x:x2] += 1
     return total / count

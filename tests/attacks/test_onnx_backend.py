@@ -50,3 +50,37 @@ def test_auto_times_both_on_the_first_call_and_keeps_the_faster():
 def test_unknown_backend_is_rejected():
     with pytest.raises(ValueError, match="tensorrt"):
         InferenceEngine(_red10(), "tensorrt")
+
+
+def test_batches_are_bounded_by_pixels_and_give_the_one_at_a_time_output():
+    engine = InferenceEngine(_red10(), "onnx", export_hw=(32, 32), batch_pixels=3 * 32 * 48)
+    x = torch.rand(7, 3, 32, 48, generator=torch.Generator().manual_seed(3))
+    assert [b.shape[0] for b in engine.batches(x)] == [3, 3, 1]
+    assert [b.shape[0] for b in engine.batches(torch.rand(2, 3, 64, 96))] == [1, 1]  # never fewer than one
+    one_at_a_time = torch.cat([engine(image[None]) for image in x])
+    assert (engine(x) - one_at_a_time).abs().max() <= 1e-5
+
+
+def _broken_export() -> bytes:
+    raise RuntimeError("operator not supported")
+
+
+def test_a_failed_export_falls_back_to_torch_only_when_allowed(caplog):
+    model = _red10()
+    x = torch.rand(1, 3, 16, 16)
+    for engine in (InferenceEngine(model, "auto", exporter=_broken_export),
+                   InferenceEngine(model, "onnx", exporter=_broken_export, fallback=True)):
+        assert engine.backend == "torch"
+        assert "operator not supported" in engine.describe()["fallback_reason"]
+        assert torch.equal(engine(x), InferenceEngine(model, "torch")(x))
+    assert "operator not supported" in caplog.text
+    with pytest.raises(RuntimeError, match="operator not supported"):
+        InferenceEngine(model, "onnx", exporter=_broken_export)
+
+
+def test_describe_records_the_choice_of_auto():
+    engine = InferenceEngine(_red10(), "auto", export_hw=(32, 32))
+    engine(torch.rand(1, 3, 32, 32))
+    described = engine.describe()
+    assert described["requested"] == "auto" and described["backend"] in {"torch", "onnx"}
+    assert described["backend"] == min(described["timings_s"], key=described["timings_s"].get)
