@@ -174,9 +174,10 @@ class InferenceEngine:
         return torch.cat([run(chunk) for chunk in chunks]).to(device=x.device, dtype=x.dtype)
 
     def describe(self) -> dict[str, Any]:
-        """What a result row records: requested and used backend, the timings that chose it, any fallback."""
-        return {"requested": self.requested, "backend": self.backend, "timings_s": dict(self.timings_s),
-                "fallback_reason": self.fallback_reason, "batch_pixels": self.batch_pixels}
+        """For a row's settings: requested and used backend, any fallback, the batch bound. Not the
+        timings (``timings_s``), which vary run to run and would change the settings' hash."""
+        return {"requested": self.requested, "backend": self.backend, "fallback_reason": self.fallback_reason,
+                "batch_pixels": self.batch_pixels}
 
 
 def _channels(model: nn.Module) -> int:
