@@ -4,10 +4,10 @@
 the default dynamo exporter needs ``onnxscript``, which is not installed, while the TorchScript
 exporter works offline and exports NAFNet, RED10 and SegFormer with dynamic batch and image size.
 On 2 CPU cores ONNX Runtime runs the quick-profile NAFNet 1.8x (RED10 1.7x) as fast as eager torch
-at 512 x 1024 (tests/benchmarks/test_restorer_speed.py), and SegFormer-B0 about 1.5x on the
-evaluation's 256 x 256 windows in batches of 8 (tests/benchmarks/test_segformer_speed.py), but
-that is a property of the machine, the network and the image size, so ``backend="auto"`` measures
-both once and keeps the faster.
+at 512 x 1024 (tests/benchmarks/test_restorer_speed.py; 3.2x and 3.9x with the machine loaded
+8-fold), and SegFormer-B0 1.9x on the evaluation's 256 x 256 windows in batches of 8
+(tests/benchmarks/test_segformer_speed.py), but that is a property of the machine, the network
+and the image size, so ``backend="auto"`` measures both once and keeps the faster.
 """
 
 from __future__ import annotations
@@ -28,9 +28,9 @@ __all__ = ["BACKENDS", "DEFAULT_BATCH_PIXELS", "Backend", "InferenceEngine", "On
 Backend = Literal["auto", "torch", "onnx"]
 BACKENDS: tuple[str, ...] = ("auto", "torch", "onnx")
 _OPSET = 17
-# Pixels per network call: 4 images of 512 x 1024. On 2 cores the quick NAFNet ran 0.32 images/s one
-# image at a time and 0.64 images/s four at a time (ONNX Runtime; RED10 the same either way), at
-# 2.8 GB peak resident memory; a batch of 8 at that size would hold several GiB of activations.
+# Pixels per network call: 4 images of 512 x 1024. On 2 cores ONNX Runtime ran the quick NAFNet 1.5x
+# (RED10 1.1x) as fast four at a time as one at a time (test_restorer_speed.py), at 2.8 GB peak
+# resident memory for NAFNet; a batch of 8 at that size would hold several GiB of activations.
 DEFAULT_BATCH_PIXELS = 4 * 512 * 1024
 
 log = logging.getLogger(__name__)

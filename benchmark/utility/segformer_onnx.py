@@ -1,9 +1,9 @@
 """SegFormer evaluation inference through ONNX Runtime, exported once per set of weights.
 
-On the 2-core CPU, ONNX Runtime runs SegFormer-B0's window logits (the quick profile's 256 x 256
-windows, 8 at a time) about 1.5x as fast as eager torch (1.47x measured with 2 threads,
-tests/benchmarks/test_segformer_speed.py asserts it wins), so evaluation on the CPU uses it by
-default. The backend is fixed, not timed per run as the restorers' ``"auto"`` is, so the same
+On the 2-core CPU, ONNX Runtime runs SegFormer-B0's sliding-window inference (the quick profile's
+256 x 256 windows, 8 at a time, 2 threads) 1.5-1.9x as fast as eager torch (1.86x in
+tests/benchmarks/test_segformer_speed.py, which asserts that it wins), so evaluation on the CPU
+uses it by default. The backend is fixed, not timed per run as the restorers' ``"auto"`` is, so the same
 weights on the same machine always give the same predictions (the two backends differ by ~1e-7 in
 the logits, which can flip an exact tie). The ONNX graph is cached under the run's cache folder,
 verified by its checksum, keyed by the sha256 of the weights and the versions that shape the graph;
