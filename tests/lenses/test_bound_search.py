@@ -81,10 +81,19 @@ def test_a_very_dark_lens_is_certified_without_building_block_matrices(monkeypat
     built: list[int] = []
     original = bound._psf_gram
     monkeypatch.setattr(bound, "_psf_gram", lambda psf, w, h: (built.append(w * h), original(psf, w, h))[1])
+    traced: list[int] = []
+    trace = bound.sigma_gram_trace
+    monkeypatch.setattr(bound, "sigma_gram_trace", lambda psf, s, w: (traced.append(w), trace(psf, s, w))[1])
     psf, nsr = dark.psf().detach(), noise_to_signal(dark, spectrum.noise_radiance())
-    certificate = certify_width(psf, spectrum, nsr, ENTROPY, max_width_px=96)
+    traces: dict = {}
+    certificate = certify_width(psf, spectrum, nsr, ENTROPY, max_width_px=96, traces=traces)
     assert certificate.width == 96 and certificate.limited_at is None  # every width certified
     assert certificate.exact_widths == () and built == []              # by the trace bound alone
+    assert traced == list(range(1, 97))
+    # A second frame count (bound_row's T = 30) reuses each width's trace: nothing is computed again.
+    video = certify_width(psf, spectrum, noise_to_signal(dark, spectrum.noise_radiance(), 30), ENTROPY,
+                          max_width_px=96, traces=traces)
+    assert video.width == 96 and traced == list(range(1, 97)) and built == []
 
 
 def test_a_width_beyond_the_matrix_cap_ends_the_search_with_a_lower_bound(monkeypatch, caplog):
@@ -105,3 +114,13 @@ def test_a_width_beyond_the_matrix_cap_ends_the_search_with_a_lower_bound(monkey
     assert "a lower bound" in row["bound_width_eps_note_t1"] and f"cap {cap} px" in row["bound_width_eps_note_t1"]
     assert "a lower bound" in caplog.text
     assert CERTIFY_MAX_PIXELS == bound.BLOCK_MAX_PIXELS  # the default cap is the block bound's own
+
+
+@pytest.mark.parametrize("width, size", [(3, 64), (17, 128), (100, 512), (256, 1024)])
+def test_separable_pixel_density_is_the_density_on_the_grid(width, size):
+    """`pixel_density` (separable) against its definition w^2 D(w f) through `density` point by point,
+    on a spectrum with a table and a tail, so every bound number is the earlier code's within rounding."""
+    spectrum = smooth_spectrum()
+    f = torch.fft.fftfreq(size, dtype=torch.float64)
+    reference = width**2 * spectrum.density(width * f[:, None], width * f[None, :])
+    torch.testing.assert_close(spectrum.pixel_density(width, size), reference, rtol=1e-12, atol=0)
