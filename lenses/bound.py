@@ -329,7 +329,9 @@ def certify_width(psf: torch.Tensor, spectrum: PlateSpectrum, nsr: torch.Tensor,
     searches of one lens for several frame counts share it.
     """
     traces = {} if traces is None else traces
-    width, exact, trace = 0, [], []
+    width = 0
+    exact: list[int] = []  # widths decided by the block bound
+    trace: list[int] = []  # widths certified by the trace bound
     with torch.no_grad(), tqdm(total=max_width_px, desc="certified plate width", unit="px", leave=False,
                                delay=2.0) as bar:
         while width < max_width_px:
