@@ -13,7 +13,7 @@ import logging
 import os
 import shutil
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import torch
 
@@ -28,6 +28,8 @@ from benchmark.cache import (
 )
 
 log = logging.getLogger(__name__)
+
+M = TypeVar("M", bound=torch.nn.Module)
 
 
 def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
@@ -48,7 +50,7 @@ def save_weights(path: Path, module: torch.nn.Module) -> None:
     write_verified_tensors(path, {k: v.detach().cpu().contiguous() for k, v in module.state_dict().items()})
 
 
-def load_weights(path: Path, module: torch.nn.Module) -> torch.nn.Module | None:
+def load_weights(path: Path, module: M) -> M | None:
     """`module` with the weights at `path`, or None when they are absent, corrupt or do not fit it
     (reported with the path; `module` may then hold some of them: build a fresh one)."""
     state = read_verified_tensors(path)
