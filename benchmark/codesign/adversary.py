@@ -99,7 +99,8 @@ def pretrain_adversary(lens: Lens, sampler: CropSampler, profile: Any, seed: int
         loaded = load_weights(path, net) if cached_record is not None else None
         if cached_record is not None and loaded is not None:
             return loaded, cached_record
-        log.warning("adversary pre-training %s is incomplete or corrupt (see above); training it again", path)
+        # A corrupt file was reported (with its path) as it was read; one not yet written (another run
+        # is pre-training the same adversary) is simply absent: either way, train.
         torch.manual_seed(seed)  # a fresh net, as an empty cache would start (the failed load may have filled some)
         net = build_adversary(profile.adversary_width, lens).to(device)
     probe = Probe(sampler, seed, device)

@@ -238,9 +238,7 @@ def _load_cached(net: torch.nn.Module, weights_path: Path, record_path: Path) ->
         return None
     record = read_verified_json(record_path)
     state = read_verified_tensors(weights_path) if record is not None else None
-    if record is None or state is None:
-        log.warning("cached clean utility net %s is incomplete or corrupt (see above); training it again",
-                    weights_path)
+    if record is None or state is None:  # a corrupt file was reported with its path as it was read
         return None
     net.load_state_dict(state)
     return record
