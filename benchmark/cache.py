@@ -137,11 +137,10 @@ def read_verified_json(path: Path) -> Any | None:
     return _read_parsed(path, json.loads, "JSON")
 
 
-def write_verified_tensors(path: Path, tensors: Mapping[str, torch.Tensor],
-                           metadata: dict[str, str] | None = None) -> Path:
+def write_verified_tensors(path: Path, tensors: Mapping[str, torch.Tensor]) -> Path:
     """Tensors (contiguous, CPU) as a safetensors file, verified."""
-    from safetensors.torch import save
-    return write_verified(path, save(dict(tensors), metadata=metadata))
+    from safetensors.torch import save  # torch-backed helpers import it lazily: the CLI starts without torch
+    return write_verified(path, save(dict(tensors)))
 
 
 def read_verified_tensors(path: Path) -> dict[str, torch.Tensor] | None:

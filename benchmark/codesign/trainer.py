@@ -32,9 +32,8 @@ import torch
 import torch.nn.functional as F
 from tqdm.auto import tqdm
 
-from benchmark.cache import config_hash
+from benchmark.cache import config_hash, discard, write_verified
 from benchmark.codesign.adversary import MARGIN_DB, Probe, build_adversary, pretrain_adversary
-from benchmark.cache import discard, write_verified
 from benchmark.codesign.artifacts import (
     load_checkpoint,
     load_weights,
