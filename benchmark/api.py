@@ -35,6 +35,7 @@ import attacks
 import lenses
 from benchmark import attacker_objects, executors, runner, task_costs
 from benchmark.cache import cache_root
+from benchmark.known_warnings import silence_known_warnings
 from benchmark.planning import AttackerRef, plan as plan_tasks, run_directory
 from benchmark.profiles import Profile, get_profile
 from benchmark.provenance import git_commit
@@ -189,6 +190,7 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         ValueError (and LookupError subclasses for unknown names): a bad argument, before any compute.
     """
     git_commit()  # pinned now, as the code was imported: later commits do not re-stamp this run
+    silence_known_warnings()
     cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames,
                                 budget_s)
     folder, created = prepare_out(Path(out)) if out is not None else (None, False)

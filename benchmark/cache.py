@@ -7,6 +7,10 @@ Several runs (processes, Ray workers, nodes) may share one cache folder (`PLB_CA
 - a verified artifact carries a SHA-256 sidecar (`<name>.sha256`), written after the data; a
   read checks it, and a missing, truncated or corrupt artifact is reported with its path,
   removed and read as absent, so its producer rebuilds it;
+- typed forms of the same (`write_verified_json` / `read_verified_json`, `..._tensors` for
+  safetensors, `..._checkpoint` for torch checkpoints read with `weights_only=True`) also treat
+  bytes that match their checksum but cannot be parsed (an older layout) as absent, reported;
+- `seal(path)` gives a file written by another library (a matplotlib chart) the same sidecar;
 - `exclusive(path)` is a per-task lock (an OS file lock, released by the kernel when its holder
   dies, so a crashed run never leaves a stale lock behind).
 """
@@ -16,13 +20,19 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import hashlib
+import io
 import json
 import logging
 import os
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar
+
+if TYPE_CHECKING:
+    import torch
+
+T = TypeVar("T")
 
 log = logging.getLogger(__name__)
 
@@ -94,6 +104,65 @@ def read_verified(path: Path) -> bytes | None:
     log.warning("corrupt cache artifact %s: %s; removing it, it will be rebuilt", path, reason)
     discard(path)
     return None
+
+
+def seal(path: Path) -> Path:
+    """Write the SHA-256 sidecar of a file already written in full (by a library that writes files
+    itself), so `read_verified` trusts it."""
+    path = Path(path)
+    atomic_write_text(_checksum_path(path), hashlib.sha256(path.read_bytes()).hexdigest() + "\n")
+    return path
+
+
+def _read_parsed(path: Path, parse: Callable[[bytes], T], what: str) -> T | None:
+    """`parse(bytes)` of a verified artifact, or None when absent, corrupt or unparsable (reported, removed)."""
+    data = read_verified(path)
+    if data is None:
+        return None
+    try:
+        return parse(data)
+    except Exception as exc:  # json, safetensors and torch each raise their own types for bad bytes
+        log.warning("unreadable cache artifact %s (%s: %s); removing it, it will be rebuilt", path, what, exc)
+        discard(path)
+        return None
+
+
+def write_verified_json(path: Path, data: Any) -> Path:
+    """`data` as indented JSON (non-finite floats as NaN/Infinity), verified."""
+    return write_verified(path, json.dumps(data, indent=1, default=float).encode())
+
+
+def read_verified_json(path: Path) -> Any | None:
+    """The JSON written by `write_verified_json`, or None (absent, or corrupt: reported and removed)."""
+    return _read_parsed(path, json.loads, "JSON")
+
+
+def write_verified_tensors(path: Path, tensors: Mapping[str, torch.Tensor]) -> Path:
+    """Tensors (contiguous, CPU) as a safetensors file, verified."""
+    from safetensors.torch import save  # torch-backed helpers import it lazily: the CLI starts without torch
+    return write_verified(path, save(dict(tensors)))
+
+
+def read_verified_tensors(path: Path) -> dict[str, torch.Tensor] | None:
+    """The tensors of a `write_verified_tensors` file, or None (absent, or corrupt: reported and removed)."""
+    from safetensors.torch import load
+    return _read_parsed(path, load, "safetensors")
+
+
+def write_verified_checkpoint(path: Path, state: Mapping[str, Any]) -> Path:
+    """A checkpoint of tensors, numbers, strings, lists and dicts (`torch.save`), verified."""
+    import torch
+    buffer = io.BytesIO()
+    torch.save(dict(state), buffer)
+    return write_verified(path, buffer.getvalue())
+
+
+def read_verified_checkpoint(path: Path) -> dict[str, Any] | None:
+    """The checkpoint of `write_verified_checkpoint` on the CPU, read with `weights_only=True` (never
+    unpickled), or None (absent, or corrupt: reported and removed)."""
+    import torch
+    return _read_parsed(path, lambda data: torch.load(io.BytesIO(data), map_location="cpu", weights_only=True),
+                        "torch checkpoint")
 
 
 def discard(path: Path) -> None:

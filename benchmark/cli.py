@@ -272,6 +272,8 @@ def cmd_pretrain(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     from lenses.registry import DuplicateNameError
+    from benchmark.known_warnings import silence_known_warnings
+    silence_known_warnings()
     args = build_parser().parse_args(argv)
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", force=True)

@@ -24,12 +24,11 @@ once the band holds the content, and the content moves to lower frequencies as w
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 import numpy as np
 
-from benchmark.cache import atomic_write_text, config_hash
+from benchmark.cache import config_hash, read_verified_json, write_verified_json
 
 from benchmark.scenes import load_scene
 from benchmark.scenes.plates import PLATE_SIZE_M
@@ -126,8 +125,8 @@ def cached_plate_spectrum(cache_dir: Path, n_scenes: int, size: tuple[int, int] 
     key = config_hash({"what": "plate-spectrum", "n_scenes": n_scenes, "size": size, "seed": seed,
                        "fields": "min_radiance"})
     path = Path(cache_dir) / "bound" / f"plate-spectrum-{key}.json"
-    if path.is_file():
-        d = json.loads(path.read_text())
+    d = read_verified_json(path)
+    if d is not None:
         return PlateSpectrum(table=np.asarray(d["table"]), aspect=d["aspect"],
                              tail_amplitude=tuple(d["tail_amplitude"]), tail_exponent=d["tail_exponent"],
                              mean_radiance=tuple(d["mean_radiance"]), n_crops=d["n_crops"],
@@ -135,5 +134,5 @@ def cached_plate_spectrum(cache_dir: Path, n_scenes: int, size: tuple[int, int] 
     spectrum = estimate_plate_spectrum(n_scenes, size, seed)
     d = dataclasses.asdict(spectrum)
     d["table"] = spectrum.table.tolist()
-    atomic_write_text(path, json.dumps(d))
+    write_verified_json(path, d)
     return spectrum

@@ -18,7 +18,6 @@ all (measured there).
 
 from __future__ import annotations
 
-import json
 import logging
 from pathlib import Path
 from typing import Any
@@ -29,7 +28,7 @@ from tqdm.auto import tqdm
 
 from attacks.networks.red10 import RED10
 from benchmark.cache import config_hash
-from benchmark.codesign.artifacts import load_weights, save_weights, write_json
+from benchmark.codesign.artifacts import load_weights, read_json, save_weights, write_json
 from benchmark.codesign.data import CropSampler, step_generator
 from benchmark.metrics import psnr
 from lenses.lens import Lens
@@ -92,10 +91,18 @@ def pretrain_adversary(lens: Lens, sampler: CropSampler, profile: Any, seed: int
               "seed": seed, "margin_db": MARGIN_DB, "check_every": CHECK_EVERY, "max_steps": MAX_STEPS,
               "scenes": scene_set}
     path = Path(cache_dir) / "adversary" / f"red10-{config_hash(config)}.safetensors"
+    record_path = path.with_suffix(".json")
     torch.manual_seed(seed)
     net = build_adversary(profile.adversary_width, lens).to(device)
-    if path.is_file() and path.with_suffix(".json").is_file():
-        return load_weights(path, net), json.loads(path.with_suffix(".json").read_text())
+    if path.exists() or record_path.exists():
+        cached_record = read_json(record_path)
+        loaded = load_weights(path, net) if cached_record is not None else None
+        if cached_record is not None and loaded is not None:
+            return loaded, cached_record
+        # A corrupt file was reported (with its path) as it was read; one not yet written (another run
+        # is pre-training the same adversary) is simply absent: either way, train.
+        torch.manual_seed(seed)  # a fresh net, as an empty cache would start (the failed load may have filled some)
+        net = build_adversary(profile.adversary_width, lens).to(device)
     probe = Probe(sampler, seed, device)
     opt = torch.optim.Adam(net.parameters(), lr=profile.deb_lr)
     curve = [{"step": 0, **probe.measure(lens, net)}]
@@ -123,9 +130,6 @@ def pretrain_adversary(lens: Lens, sampler: CropSampler, profile: Any, seed: int
         log.warning("adversary pre-training stopped after %d steps at %.2f dB, short of the white-balanced image "
                     "(%.2f dB) + %.1f dB", step, last["adversary_psnr_db"], last["white_balanced_psnr_db"], MARGIN_DB)
     record = {"steps": step, "margin_db": MARGIN_DB, "reached": reached, "curve": curve}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".tmp{torch.randint(1 << 30, (1,)).item()}")
-    save_weights(tmp, net)
-    write_json(path.with_suffix(".json"), record)
-    tmp.replace(path)  # the weights last: their presence means the record is there too
+    write_json(record_path, record)
+    save_weights(path, net)
     return net, record

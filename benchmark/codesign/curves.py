@@ -5,7 +5,9 @@ step: L_seg, L_deb, the penalty, each gradient norm, the lambda applied, each co
 PSF radius) and to TensorBoard event files in `<run>.live/tensorboard/` (read them with
 `tensorboard --logdir`, or `tensorboard.backend.event_processing`; no server is started). The
 published run folder gets `curves.jsonl` (rewritten from the checkpointed curves, so a resumed
-run has each step exactly once), the event files and `curves.png`.
+run has each step exactly once), the event files and `curves.png`; `curves.jsonl` and `curves.png`
+carry the cache's checksum sidecar, the event files need none (every TFRecord carries its own
+CRC32C, which TensorBoard checks).
 """
 
 from __future__ import annotations
@@ -18,12 +20,14 @@ from typing import Any
 
 from torch.utils.tensorboard import SummaryWriter
 
+from benchmark.cache import seal, write_verified
 from benchmark.charts import new_figure, save_figure
 from benchmark.codesign.coefficients import NOLL_NAMES
 
 # TensorBoard groups: prefix of a stat's name -> folder of its tag.
 _GROUPS = (("grad_", "grad_norm/"), ("lambda_", "lambda/"), ("adversary_", "adversary/"))
 _LOSSES = {"seg": "loss/L_seg", "deb": "loss/L_deb", "penalty": "loss/penalty"}
+PUBLISHED_FILES = ("curves.jsonl", "curves.png")  # the checksummed files `publish_into` writes
 
 
 def tag(key: str) -> str:
@@ -75,11 +79,10 @@ class CurveLog:
     def publish_into(self, folder: Path, curves: list[dict[str, Any]], title: str) -> None:
         """Write curves.jsonl, the event files and curves.png of a finished run into `folder`."""
         folder = Path(folder)
-        with open(folder / "curves.jsonl", "w", encoding="utf-8") as f:
-            f.writelines(json.dumps(entry) + "\n" for entry in curves)
+        write_verified(folder / "curves.jsonl", "".join(json.dumps(entry) + "\n" for entry in curves).encode())
         if self.enabled and (self.live_dir / "tensorboard").is_dir():
             shutil.copytree(self.live_dir / "tensorboard", folder / "tensorboard")
-        chart(curves, folder / "curves.png", title)
+        seal(chart(curves, folder / "curves.png", title))
 
     def remove_live(self) -> None:
         shutil.rmtree(self.live_dir, ignore_errors=True)

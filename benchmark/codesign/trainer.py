@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import json
 import logging
 import math
+import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,19 +32,21 @@ import torch
 import torch.nn.functional as F
 from tqdm.auto import tqdm
 
-from benchmark.cache import config_hash
+from benchmark.cache import config_hash, discard, write_verified
 from benchmark.codesign.adversary import MARGIN_DB, Probe, build_adversary, pretrain_adversary
 from benchmark.codesign.artifacts import (
     load_checkpoint,
     load_weights,
     publish_directory,
+    read_json,
     save_checkpoint,
     save_weights,
+    verified,
     write_json,
 )
 from benchmark.codesign.balancing import Balance, OpticsContext, settings
 from benchmark.codesign.coefficients import INITIAL_AMPLITUDE_UM, NOLL_NAMES, bound_limited, initial_coefficients
-from benchmark.codesign.curves import CurveLog
+from benchmark.codesign.curves import PUBLISHED_FILES, CurveLog
 from benchmark.codesign.data import CropSampler, step_generator
 from benchmark.codesign.replicas import SingleProcess
 from benchmark.codesign.schemes import Scheme
@@ -132,18 +134,33 @@ class CoDesign:
 
     # ---- loading -------------------------------------------------------------------------------
     def load(self) -> TrainedLens | None:
-        """The finished run from the cache, or None."""
+        """The finished run from the cache, or None.
+
+        Every file of the run folder is checked against its checksum; a run with a missing, corrupt
+        or unreadable file is reported (each bad file with its path), removed and read as absent, so
+        `load_or_train` trains it again rather than reuse a part of it.
+        """
         d = self.directory
-        if not (d / "record.json").is_file():
+        if not d.is_dir():
             return None
-        record = json.loads((d / "record.json").read_text())
-        lens = Lens(load_spec(d / "lens.toml"), geometry=None).to(self.device)
-        utility = load_weights(d / "utility.safetensors", build_segformer(self.profile.utility_model)).to(self.device)
+        record = read_json(d / "record.json")
+        spec_ok = verified(d / "lens.toml")
+        utility = load_weights(d / "utility.safetensors", build_segformer(self.profile.utility_model))
         adversary = None
-        if (d / "adversary.safetensors").is_file():
+        if self.scheme.adversary:
             adversary = load_weights(d / "adversary.safetensors", build_adversary(self.profile.adversary_width))
+        curves_ok = all([verified(d / name) for name in PUBLISHED_FILES])  # a list: check (and report) each
+        if record is None or not spec_ok or utility is None or (self.scheme.adversary and adversary is None) \
+                or not curves_ok:
+            log.warning("co-design run %s is incomplete or corrupt (see above); removing it, it will be trained "
+                        "again", d)
+            shutil.rmtree(d, ignore_errors=True)
+            return None
+        lens = Lens(load_spec(d / "lens.toml"), geometry=None).to(self.device)
+        if adversary is not None:
             adversary = adversary.to(self.device)
             adversary.eval()
+        utility = utility.to(self.device)
         utility.eval()
         return TrainedLens(lens, utility, adversary, record, d)
 
@@ -325,7 +342,7 @@ class CoDesign:
                                    "end": Probe(state.sampler, self.seed, self.device).measure(lens, state.deb)}
         if self.replicas.is_writer:
             self._publish(state, record)
-            self.checkpoint_path.unlink(missing_ok=True)
+            discard(self.checkpoint_path)
             if state.log is not None:
                 state.log.remove_live()
 
@@ -337,7 +354,7 @@ class CoDesign:
             state.lens.current_spec(), name=self.name,
             description=f"co-designed with scheme {self.scheme.name!r}, seed {self.seed}, from initial coefficients "
                         f"[{start}] um (seeded draw of at most {INITIAL_AMPLITUDE_UM} um per free term)")
-        (staging / "lens.toml").write_text(spec_to_toml(learned))
+        write_verified(staging / "lens.toml", spec_to_toml(learned).encode())
         save_weights(staging / "utility.safetensors", state.seg)
         if state.deb is not None:
             save_weights(staging / "adversary.safetensors", state.deb)

@@ -11,7 +11,10 @@ fifth of training (from the last curve point at or before 80 % of the steps to t
 sharp val mIoU by less than ``PLATEAU_GAIN``.
 
 The run checkpoints at every curve point and resumes from it (batches are a pure function of
-(seed, step)); the finished net and its record are cached by a hash of the recipe.
+(seed, step)); the finished net and its record are cached by a hash of the recipe. Each of these
+files carries the cache's checksum (:mod:`benchmark.cache`): a corrupt or truncated one is reported
+with its path and removed, a corrupt checkpoint restarts training from step 0, a corrupt net or
+record trains the net again.
 ``python -m benchmark pretrain`` runs it and exports the weights and their provenance into the
 package (:mod:`benchmark.utility.clean` loads them).
 """
@@ -19,7 +22,6 @@ package (:mod:`benchmark.utility.clean` loads them).
 from __future__ import annotations
 
 import argparse
-import io
 import logging
 import json
 import math
@@ -35,7 +37,18 @@ import torch.nn.functional as F
 from safetensors.torch import load_file, save_file
 from tqdm.auto import tqdm
 
-from benchmark.cache import atomic_write_bytes, atomic_write_text, cache_root, config_hash
+from benchmark.cache import (
+    atomic_write_text,
+    cache_root,
+    config_hash,
+    discard,
+    read_verified_checkpoint,
+    read_verified_json,
+    read_verified_tensors,
+    write_verified_checkpoint,
+    write_verified_json,
+    write_verified_tensors,
+)
 from benchmark.provenance import git_commit, package_versions
 from benchmark.scenes import CLASS_NAMES, load_scenes
 from benchmark.utility.pretrain_data import RareClassCropSampler
@@ -115,12 +128,6 @@ def plateau(curve: list[dict[str, Any]], steps: int) -> dict[str, Any]:
             "from_step": start[-1]["step"], "threshold": PLATEAU_GAIN}
 
 
-def _save_checkpoint(path: Path, state: dict[str, Any]) -> None:
-    buffer = io.BytesIO()
-    torch.save(state, buffer)
-    atomic_write_bytes(path, buffer.getvalue())
-
-
 def _load_avg() -> list[float] | None:
     try:
         return [round(v, 2) for v in os.getloadavg()]
@@ -141,9 +148,9 @@ def train(profile: Any, seed: int, device: str, cache_dir: Path, scene_set: str 
     weights_path, record_path = directory / f"{stem}.safetensors", directory / f"{stem}.json"
     torch.manual_seed(seed)
     net = build_segformer(profile.utility_model).to(device)
-    if weights_path.is_file() and record_path.is_file():
-        net.load_state_dict(load_file(str(weights_path)))
-        return net.eval(), json.loads(record_path.read_text())
+    cached = _load_cached(net, weights_path, record_path)
+    if cached is not None:
+        return net.eval(), cached
 
     t_start = time.perf_counter()
     steps, every = profile.pretrain_steps, max(1, profile.pretrain_eval_every)
@@ -152,12 +159,16 @@ def train(profile: Any, seed: int, device: str, cache_dir: Path, scene_set: str 
     checkpoint_path = directory / f"{stem}.checkpoint.pt"
     state: dict[str, Any] = {"step": 0, "curve": [], "train_s": 0.0, "eval_s": 0.0, "scene_s": 0.0,
                              "loads": []}
-    if checkpoint_path.is_file():
-        saved = torch.load(checkpoint_path, map_location="cpu", weights_only=True)
+    present = checkpoint_path.exists()
+    saved = read_verified_checkpoint(checkpoint_path)
+    if saved is not None:
         net.load_state_dict(saved.pop("net"))
         opt.load_state_dict(saved.pop("opt"))
         state.update(saved)
         log.info("resuming the clean utility pre-training at step %d from %s", state["step"], checkpoint_path)
+    elif present:
+        log.warning("discarded the corrupt checkpoint %s; the clean utility pre-training restarts from step 0",
+                    checkpoint_path)
     t0 = time.perf_counter()
     train_scenes = load_scenes(scene_set, "train", profile.pretrain_scenes, profile.image_size, seed)
     sampler = RareClassCropSampler(train_scenes, profile.pretrain_crop, profile.pretrain_batch, seed, RARE_FRACTION)
@@ -200,7 +211,7 @@ def train(profile: Any, seed: int, device: str, cache_dir: Path, scene_set: str 
             losses = []
             if progress:
                 bar.write(f"step {done}: sharp val mIoU {point['miou']:.3f}, train CE {point['train_ce']:.3f}")
-            _save_checkpoint(checkpoint_path, {**state, "net": net.state_dict(), "opt": opt.state_dict()})
+            write_verified_checkpoint(checkpoint_path, {**state, "net": net.state_dict(), "opt": opt.state_dict()})
             t_train = time.perf_counter()
     net.eval()
     curve = state["curve"]
@@ -214,13 +225,23 @@ def train(profile: Any, seed: int, device: str, cache_dir: Path, scene_set: str 
                          "threads": torch.get_num_threads(), "load_avg_1_5_15min_at_curve_points": state["loads"],
                          "this_call_s": time.perf_counter() - t_start},
               "device": device, "commit": git_commit(), "packages": package_versions()}
-    directory.mkdir(parents=True, exist_ok=True)
-    tmp = weights_path.with_name(f".{weights_path.name}.{os.getpid()}.tmp")
-    save_file({k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}, str(tmp))
-    os.replace(tmp, weights_path)
-    atomic_write_text(record_path, json.dumps(record, indent=1) + "\n")
-    checkpoint_path.unlink(missing_ok=True)
+    write_verified_json(record_path, record)
+    write_verified_tensors(weights_path, {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()})
+    discard(checkpoint_path)
     return net, record
+
+
+def _load_cached(net: torch.nn.Module, weights_path: Path, record_path: Path) -> dict[str, Any] | None:
+    """The cached record, with the cached weights loaded into ``net``, when both files are intact;
+    else None (a corrupt file is reported with its path and removed; ``net`` is left untouched)."""
+    if not (weights_path.exists() or record_path.exists()):
+        return None
+    record = read_verified_json(record_path)
+    state = read_verified_tensors(weights_path) if record is not None else None
+    if record is None or state is None:  # a corrupt file was reported with its path as it was read
+        return None
+    net.load_state_dict(state)
+    return record
 
 
 def cached_clean_net(profile: Any, seed: int, device: str, cache_dir: Path, scene_set: str = "synthetic",

@@ -138,5 +138,5 @@ def test_only_rank_0_writes_and_resume_reads_its_checkpoint(ranks):
         codesign = root / scheme / "codesign"
         assert [p.name for p in codesign.iterdir() if "staging" in p.name or p.suffix == ".pt"] == []
         (published,) = codesign.iterdir()
-        assert {p.name for p in published.iterdir()} == {"lens.toml", "utility.safetensors", "adversary.safetensors",
-                                                         "record.json", "curves.jsonl", "curves.png", "tensorboard"}
+        files = {"lens.toml", "utility.safetensors", "adversary.safetensors", "record.json", "curves.jsonl", "curves.png"}
+        assert {p.name for p in published.iterdir()} == files | {f + ".sha256" for f in files} | {"tensorboard"}
