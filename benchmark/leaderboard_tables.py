@@ -127,14 +127,23 @@ def violations_table(found: Sequence[tuple[Entry, Any]]) -> str:
                        str(v.measured.n_plates), f"{100 * v.ceiling_high:.1f}"] for e, v in found])
 
 
+FINDINGS_HEAD = ("profile", "finding", "a", "b", "a's figure", "b's figure", "paired a - b [95 % CI]", "p", "test",
+                 "n", "verdict")
+
+
+def findings_lines(entries: Sequence[Entry]) -> list[list[str]]:
+    """One line of cells (FINDINGS_HEAD) per finding checked on the entries (benchmark.findings)."""
+    return [[f.profile, f.claim + (" (suite check)" if f.source == "suite" else ""), f.lens_a, f.lens_b,
+             f.figure_text("a"), f.figure_text("b"), f.difference_text(), f.p_text(),
+             "" if f.comparison is None else f.comparison.method, "" if f.comparison is None else str(f.comparison.n),
+             f.decision_text()] for f in check_findings(entries)]
+
+
 def findings_table(entries: Sequence[Entry]) -> str:
-    """The paper's findings checked per profile (benchmark.findings), or "" when none applies."""
-    found = check_findings(entries)
-    if not found:
-        return ""
-    return _markdown(["profile", "finding", "a", "b", "a", "b", "a - b", "verdict"],
-                     [[f.profile, f.claim, f.lens_a, f.lens_b, pm(f.a), pm(f.b), f"{f.difference:+.3f}", f.verdict]
-                      for f in found])
+    """The paper's findings decided per profile by paired comparisons (benchmark.findings), or "" when
+    none applies."""
+    lines = findings_lines(entries)
+    return _markdown(FINDINGS_HEAD, lines) if lines else ""
 
 
 def attacker_table(entries: Sequence[Entry]) -> str:

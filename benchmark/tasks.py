@@ -35,7 +35,7 @@ from benchmark.planning import AttackerRef, Task, fit_task
 from benchmark.plate_scoring import readable
 from benchmark.plate_spectrum import cached_plate_spectrum
 from benchmark.provenance import provenance
-from benchmark.rows import RowBuilder
+from benchmark.rows import RowBuilder, utility_units
 from benchmark.run_pictures import plate_gallery, sample_grid
 from benchmark.run_config import RunConfig, training_scenes
 from benchmark.scenes import Scene, load_scene, load_scenes, plate_entropy_bits
@@ -253,6 +253,7 @@ def _sharp(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
         metrics, confusion = utility_scores(clean, sharp, scenes, cfg)
         row = builder.row("utility", metrics)
         utility_intervals(row, confusion)
+        row.set_units(utility_units(scenes, confusion))
         rows.append(row)
     segment = segmenter(clean, cfg) if clean is not None else None
     target = Target("sharp", scenes, sharp, sharp, fit_context(None, cfg, task.seed, segment), segment, segment,
@@ -292,6 +293,7 @@ def _utility(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     builder = _builder(cfg, task.lens, task.seed, lens)
     row = builder.row("utility", {**metrics, "fit_s": fit_s})
     utility_intervals(row, confusion)
+    row.set_units(utility_units(scenes, confusion))
     return TaskResult([row], builder.settings)
 
 
