@@ -252,7 +252,8 @@ def check_claim(claim: Claim, ea: Entry, eb: Entry) -> Finding:
 
 
 def check_findings(entries: Sequence[Entry], claims: Sequence[Claim] = PAPER_FINDINGS) -> list[Finding]:
-    """Every claim whose two lenses have entries of the same profile and scenes, decided on them."""
+    """Every claim whose two lenses have entries of the same profile and scenes, both with the claim's
+    measure, decided on them."""
     found = []
     by_key = {(e.lens, e.profile, e.scenes): e for e in entries}
     for profile, scenes in dict.fromkeys((e.profile, e.scenes) for e in entries):
@@ -260,7 +261,7 @@ def check_findings(entries: Sequence[Entry], claims: Sequence[Claim] = PAPER_FIN
             ea, eb = by_key.get((claim.a, profile, scenes)), by_key.get((claim.b, profile, scenes))
             if ea is None or eb is None:
                 continue
-            if claim.measure == "miou" and (ea.metric("utility", "miou") is None or eb.metric("utility", "miou") is None):
-                continue
+            if _figure(ea, claim.measure, None) is None or _figure(eb, claim.measure, None) is None:
+                continue  # nothing measured on one side: the claim does not apply
             found.append(check_claim(claim, ea, eb))
     return found

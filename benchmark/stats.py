@@ -238,7 +238,11 @@ def stratified_paired_bootstrap(a: Sequence[np.ndarray], b: Sequence[np.ndarray]
 
     Returns:
         ``Comparison`` of the observed difference with the percentile interval and the two-sided
-        bootstrap p-value of ``paired_bootstrap``; ``n`` is the number of paired units over all strata.
+        bootstrap p-value of ``paired_bootstrap``, never below ``2 ** (1 - n)``: the smallest
+        two-sided p-value an exact paired (sign-flip) test can reach with n units. On a handful
+        of units the percentile bootstrap is overconfident (two scenes that both favour A put
+        every resample on A's side), and no finding may rest on that. ``n`` is the number of
+        paired units over all strata.
     """
     _check_confidence(confidence)
     if n_resamples < 1:
@@ -263,8 +267,9 @@ def stratified_paired_bootstrap(a: Sequence[np.ndarray], b: Sequence[np.ndarray]
     low, high = np.quantile(differences, [tail, 1.0 - tail])
     below = (np.count_nonzero(differences <= 0.0) + 1) / (differences.size + 1)
     above = (np.count_nonzero(differences >= 0.0) + 1) / (differences.size + 1)
-    return Comparison(observed, float(low), float(high), min(1.0, 2.0 * min(below, above)), method,
-                      int(sum(x.shape[0] for x in first)), confidence)
+    n = int(sum(x.shape[0] for x in first))
+    p_value = min(1.0, max(2.0 * min(below, above), 2.0 ** (1 - n)))
+    return Comparison(observed, float(low), float(high), p_value, method, n, confidence)
 
 
 def mcnemar_exact(b: int, c: int) -> float:
