@@ -68,6 +68,21 @@ def _single(attack: str, name: str, fmt: str) -> Callable[[Entry, set[str] | Non
     return cell
 
 
+def _bound_limited(e: Entry, attacks: set[str] | None) -> Cell:
+    """"yes (seeds on a bound / seeds: terms)" when the trained mask ended on a coefficient bound in
+    any seed, "no" when it never did, "" for a lens that was not trained (no such metric)."""
+    chain = e.chain("lens")
+    stat = None if chain is None else chain.metrics.get("bound_limited")
+    if stat is None:
+        return "", None
+    flags = [v for v in stat.values if v is not None]
+    hits = sum(1 for v in flags if v > 0)
+    if not hits:
+        return "no", 0.0
+    terms = chain.notes.get("bound_limited_terms", "") if chain is not None else ""
+    return f"yes ({hits}/{len(flags)} seeds{': ' + terms if terms else ''})", hits / len(flags)
+
+
 MAIN_COLUMNS = (
     Column("lens", _text(lambda e: e.lens)),
     Column("profile", _text(lambda e: e.profile)),
@@ -81,6 +96,7 @@ MAIN_COLUMNS = (
     Column("worst plate acc % (chain)", _worst("plate_acc", "reader", 1, pct=True)),
     Column("W_5% px (Fano, T=1)", _single("bound", "bound_width_eps_t1", ".0f")),
     Column("lens img/s", _single("lens", "images_per_s", ".1f")),
+    Column("bound-limited", _bound_limited),
 )
 _FANO = next(i for i, c in enumerate(MAIN_COLUMNS) if c.header.startswith("W_5% px (Fano"))
 
