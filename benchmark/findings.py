@@ -131,7 +131,7 @@ class _Unpaired(Exception):
     """Why two entries cannot be compared unit by unit (the message is the verdict)."""
 
 
-def _aligned(pairs: Sequence[tuple[Units, ...]]) -> list[list[int]]:
+def _aligned(pairs: Sequence[Units]) -> list[list[int]]:
     """For units of one seed (several rows, all sides), the indices of the ids they all hold, in one order."""
     names = [u.names() for u in pairs]
     common = set(names[0]).intersection(*names[1:])
