@@ -21,7 +21,7 @@ from benchmark.budget import time_budget
 from benchmark.intervals import plate_intervals, scene_intervals
 from benchmark.metrics import psnr, ssim
 from benchmark.plate_scoring import PlateOutcome, score_scene, summarise
-from benchmark.rows import RowBuilder
+from benchmark.rows import RowBuilder, plate_units, scene_units
 from benchmark.run_config import RunConfig
 from benchmark.scenes import Scene
 from benchmark.schema import Row, RowError, chain_name
@@ -240,6 +240,7 @@ def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dic
         row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
                        threat_model=attacker.threat_model.value, settings={"restorer": attacker.describe()})
         scene_intervals(row, per_image, seed=row.seed)
+        row.set_units(scene_units(target.scenes, per_image))
         out.rows.append(row)
 
 
@@ -271,6 +272,7 @@ def run_reader(target: Target, reader: attacks.Reader, cfg: RunConfig, rows: Row
         row = rows.row(kind, {**summarise(outcomes), **timing}, attack=chain, restorer=restorer, reader=reader.name,
                        threat_model=reader.threat_model.value, settings=settings)
         plate_intervals(row, outcomes)
+        row.set_units(plate_units(outcomes))
         out.rows.append(row)
         out.plates.extend({"lens": target.lens_name, "attack": chain, "seed": row.seed, **o.__dict__}
                           for o in outcomes)

@@ -9,7 +9,13 @@ Entry format, version 2 (``ENTRY_VERSION``)::
     {"entry_version": 2, "lens", "profile", "scenes", "seeds",
      "profile_values": the profile's settings, "coefficients_um": the mask's Zernike coefficients,
      "lens_spec": the lens spec, "settings": {settings hash: lens + attacker settings},
-     "rows": [benchmark.schema.Row as JSON, one per attack chain x seed]}
+     "rows": [benchmark.schema.Row as JSON, one per attack chain x seed],
+     "unit_ids": {key: [unit ids]}}
+
+A row's per-unit outcomes (``schema.Units``) name their units; in an entry the list of ids, which
+every chain of one seed shares, is stored once under ``unit_ids`` and the row's ``units.ids`` holds
+its key (a hash of the ids). Entries written before units existed have no ``unit_ids`` and rows
+without units; they read as before (``Entry.units`` is None for them).
 
 Version 1 stored per attack chain the metrics' mean, std and per-seed values, and one provenance
 for the entry (or per merged row); ``migrate_entry`` turns it into version 2 without loss (the
@@ -22,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import json
 import math
 from collections.abc import Sequence
@@ -31,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from benchmark.cache import atomic_write_text
-from benchmark.schema import LEGACY_PROVENANCE, Row, infer_legacy_kind
+from benchmark.schema import LEGACY_PROVENANCE, Row, Units, dumps_compact, infer_legacy_kind
 
 LEADERBOARD = Path(__file__).resolve().parent.parent / "leaderboard"
 ENTRY_VERSION = 2
@@ -80,9 +87,11 @@ class Entry:
     settings: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
+        rows, unit_ids = _shared_unit_ids([r.to_json() for r in self.rows])
         return {"entry_version": ENTRY_VERSION, "lens": self.lens, "profile": self.profile, "scenes": self.scenes,
                 "seeds": self.seeds, "profile_values": self.profile_values, "coefficients_um": self.coefficients_um,
-                "lens_spec": self.lens_spec, "settings": self.settings, "rows": [r.to_json() for r in self.rows]}
+                "lens_spec": self.lens_spec, "settings": self.settings, "rows": rows,
+                **({"unit_ids": unit_ids} if unit_ids else {})}
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> Entry:
@@ -92,9 +101,10 @@ class Entry:
             d = migrate_entry(d)
         elif version != ENTRY_VERSION:
             raise ValueError(f"leaderboard entry_version {version!r} is not one this code reads (1, {ENTRY_VERSION})")
+        rows = _expand_unit_ids(d["rows"], d.get("unit_ids") or {})
         return cls(lens=d["lens"], profile=d["profile"], scenes=d["scenes"], seeds=list(d["seeds"]),
                    profile_values=d["profile_values"], coefficients_um=d.get("coefficients_um"),
-                   lens_spec=d.get("lens_spec"), rows=[Row.from_json(r) for r in d["rows"]],
+                   lens_spec=d.get("lens_spec"), rows=[Row.from_json(r) for r in rows],
                    settings=dict(d.get("settings") or {}))
 
     def chains(self) -> list[Chain]:
@@ -133,6 +143,40 @@ class Entry:
 
     def failed(self) -> list[Row]:
         return [r for r in self.rows if not r.ok]
+
+    def units(self, attack: str, seed: int) -> Units | None:
+        """The per-unit outcomes of chain `attack` at `seed`, or None (no such ok row, or it has none)."""
+        return next((r.units for r in self.rows if r.ok and r.attack == attack and r.seed == seed), None)
+
+
+def _ids_key(ids: list[str]) -> str:
+    return hashlib.sha256("\n".join(ids).encode()).hexdigest()[:12]
+
+
+def _shared_unit_ids(rows: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], dict[str, list[str]]]:
+    """Rows (as JSON) with each ``units.ids`` list replaced by its key, and key -> ids."""
+    shared: dict[str, list[str]] = {}
+    for row in rows:
+        units = row.get("units")
+        if units is not None:
+            key = _ids_key(units["ids"])
+            shared[key] = units["ids"]
+            row["units"] = {**units, "ids": key}
+    return rows, shared
+
+
+def _expand_unit_ids(rows: list[dict[str, Any]], shared: dict[str, list[str]]) -> list[dict[str, Any]]:
+    """Inverse of ``_shared_unit_ids``; a key the entry does not hold is an error naming it."""
+    out = []
+    for row in rows:
+        units = row.get("units")
+        if units is not None and isinstance(units.get("ids"), str):
+            if units["ids"] not in shared:
+                raise ValueError(f"row {row.get('lens')}/{row.get('attack')} seed {row.get('seed')} points at unit ids "
+                                 f"{units['ids']!r} that the entry's unit_ids do not hold")
+            row = {**row, "units": {**units, "ids": shared[units["ids"]]}}
+        out.append(row)
+    return out
 
 
 def _summarise(attack: str, rows: list[Row]) -> Chain:
@@ -203,7 +247,7 @@ def migrate_directory(directory: Path = LEADERBOARD) -> list[Path]:
 # ---- reading and writing -------------------------------------------------------------------------
 
 def write_entry(path: Path, entry: Entry) -> Path:
-    atomic_write_text(path, json.dumps(entry.to_json(), indent=1, sort_keys=True, allow_nan=False) + "\n")
+    atomic_write_text(path, dumps_compact(entry.to_json(), sort_keys=True) + "\n")
     return path
 
 

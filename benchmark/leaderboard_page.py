@@ -20,9 +20,8 @@ from matplotlib.ticker import MaxNLocator
 
 from benchmark.cache import atomic_write_text
 from benchmark.charts.tradeoff import TradeoffPoint, tradeoff_points
-from benchmark.findings import check_findings
 from benchmark.leaderboard_entries import Entry
-from benchmark.leaderboard_tables import pm, table_columns
+from benchmark.leaderboard_tables import FINDINGS_HEAD, findings_lines, table_columns
 
 ANY_THREAT = "any attacker"
 # Colour per lens, in order of first appearance (colour-blind-safe "Tableau 10").
@@ -215,14 +214,12 @@ def _options(name: str, label: str, values: Sequence[str], default: str, with_al
 
 
 def findings_html(entries: Sequence[Entry]) -> str:
-    found = check_findings(entries)
-    if not found:
+    lines = findings_lines(entries)
+    if not lines:
         return "<p>No paper finding applies to these entries (they need both lenses of a claim in one profile).</p>"
-    rows = "".join(f"<tr><td>{_e(f.profile)}</td><td>{_e(f.claim)}</td><td>{_e(f.lens_a)}</td><td>{_e(f.lens_b)}</td>"
-                   f"<td>{_e(pm(f.a))}</td><td>{_e(pm(f.b))}</td><td>{f.difference:+.3f}</td><td>{_e(f.verdict)}</td></tr>"
-                   for f in found)
-    return ("<table><thead><tr><th>profile</th><th>finding</th><th>a</th><th>b</th><th>a</th><th>b</th>"
-            f"<th>a - b</th><th>verdict</th></tr></thead><tbody>{rows}</tbody></table>")
+    head = "".join(f"<th>{_e(h)}</th>" for h in FINDINGS_HEAD)
+    rows = "".join("<tr>" + "".join(f"<td>{_e(cell)}</td>" for cell in line) + "</tr>" for line in lines)
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>"
 
 
 def violations_html(found: Sequence[tuple[Entry, Any]]) -> str:

@@ -28,7 +28,10 @@ INTRO = ("Rendered by `python -m benchmark report` from `leaderboard/entries/*.j
          "used the entry's own lens spec (else \"not computed\"); ceiling % at 32 px = the most any attacker can "
          "read of 32 px plates exactly. Publishing merges "
          "with a stored entry of the same lens and profile: an attacker row keeps the seeds (listed in the attacker "
-         "table) and the provenance of the run that measured it.")
+         "table) and the provenance of the run that measured it. Findings are decided by paired comparisons on the "
+         "same scenes and plates (benchmark.findings): paired bootstrap (stratified by seed) for mIoU and the "
+         "worst-case PSNR, McNemar's exact test for the best reader's plate accuracy; 'cannot tell' where the "
+         "sample cannot separate the lenses or an entry carries no per-unit outcomes.")
 
 
 def study_charts(directory: Path, charts: Path) -> list[Path]:

@@ -68,6 +68,21 @@ def _single(attack: str, name: str, fmt: str) -> Callable[[Entry, set[str] | Non
     return cell
 
 
+def _bound_limited(e: Entry, attacks: set[str] | None) -> Cell:
+    """"yes (seeds on a bound / seeds: terms)" when the trained mask ended on a coefficient bound in
+    any seed, "no" when it never did, "" for a lens that was not trained (no such metric)."""
+    chain = e.chain("lens")
+    stat = None if chain is None else chain.metrics.get("bound_limited")
+    if stat is None:
+        return "", None
+    flags = [v for v in stat.values if v is not None]
+    hits = sum(1 for v in flags if v > 0)
+    if not hits:
+        return "no", 0.0
+    terms = chain.notes.get("bound_limited_terms", "") if chain is not None else ""
+    return f"yes ({hits}/{len(flags)} seeds{': ' + terms if terms else ''})", hits / len(flags)
+
+
 MAIN_COLUMNS = (
     Column("lens", _text(lambda e: e.lens)),
     Column("profile", _text(lambda e: e.profile)),
@@ -81,6 +96,7 @@ MAIN_COLUMNS = (
     Column("worst plate acc % (chain)", _worst("plate_acc", "reader", 1, pct=True)),
     Column("W_5% px (Fano, T=1)", _single("bound", "bound_width_eps_t1", ".0f")),
     Column("lens img/s", _single("lens", "images_per_s", ".1f")),
+    Column("bound-limited", _bound_limited),
 )
 _FANO = next(i for i, c in enumerate(MAIN_COLUMNS) if c.header.startswith("W_5% px (Fano"))
 
@@ -127,14 +143,23 @@ def violations_table(found: Sequence[tuple[Entry, Any]]) -> str:
                        str(v.measured.n_plates), f"{100 * v.ceiling_high:.1f}"] for e, v in found])
 
 
+FINDINGS_HEAD = ("profile", "finding", "a", "b", "a's figure", "b's figure", "paired a - b [95 % CI]", "p", "test",
+                 "n", "verdict")
+
+
+def findings_lines(entries: Sequence[Entry]) -> list[list[str]]:
+    """One line of cells (FINDINGS_HEAD) per finding checked on the entries (benchmark.findings)."""
+    return [[f.profile, f.claim + (" (suite check)" if f.source == "suite" else ""), f.lens_a, f.lens_b,
+             f.figure_text("a"), f.figure_text("b"), f.difference_text(), f.p_text(),
+             "" if f.comparison is None else f.comparison.method, "" if f.comparison is None else str(f.comparison.n),
+             f.decision_text()] for f in check_findings(entries)]
+
+
 def findings_table(entries: Sequence[Entry]) -> str:
-    """The paper's findings checked per profile (benchmark.findings), or "" when none applies."""
-    found = check_findings(entries)
-    if not found:
-        return ""
-    return _markdown(["profile", "finding", "a", "b", "a", "b", "a - b", "verdict"],
-                     [[f.profile, f.claim, f.lens_a, f.lens_b, pm(f.a), pm(f.b), f"{f.difference:+.3f}", f.verdict]
-                      for f in found])
+    """The paper's findings decided per profile by paired comparisons (benchmark.findings), or "" when
+    none applies."""
+    lines = findings_lines(entries)
+    return _markdown(FINDINGS_HEAD, lines) if lines else ""
 
 
 def attacker_table(entries: Sequence[Entry]) -> str:

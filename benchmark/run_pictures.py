@@ -1,8 +1,10 @@
-"""The pictures of one lens and seed: the sample grid (scene, PSF, sensor, restorations) and each
-reader's plate gallery, written into the task's folder."""
+"""The pictures of one lens and seed: the sample grid (scene, PSF, sensor, restorations), each
+reader's plate gallery and, for a co-designed lens, its training curves, written into the task's folder."""
 
 from __future__ import annotations
 
+import logging
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -12,8 +14,11 @@ import lenses
 from benchmark.charts.plate_gallery import write_plate_gallery
 from benchmark.evaluation import Attacked, Target
 from benchmark.plate_scoring import readable
+from benchmark.cache import config_hash
 from benchmark.charts.samples import write_sample_grid
 from benchmark.schema import chain_name
+
+log = logging.getLogger(__name__)
 
 
 def _first_as_hwc(images: torch.Tensor) -> np.ndarray:
@@ -57,4 +62,22 @@ def plate_gallery(target: Target, out: Attacked, reader: str, folder: Path) -> s
              **{n: [out.reads[c][i] for i in pick] for n, c in chains.items()}}
     name = f"plates_{target.lens_name}_{reader}_seed{target.ctx.seed}.png".replace("/", "_")
     write_plate_gallery(images, scenes, reads, folder / name)
+    return name
+
+
+def training_curves(lens: lenses.Lens, seed: int, cache_dir: Path, folder: Path) -> str | None:
+    """Copy the co-design run's curves.png (benchmark.codesign.curves) into `folder`; its file name,
+    or None for a lens that was not co-designed here.
+
+    The run's folder is found from its training record as the trainer names it:
+    ``cache_dir/codesign/{name}-{config_hash(config)}``."""
+    record = getattr(lens, "training_record", None)
+    if not record or "config" not in record or "name" not in record:
+        return None
+    source = Path(cache_dir) / "codesign" / f"{record['name']}-{config_hash(record['config'])}" / "curves.png"
+    if not source.is_file():
+        log.warning("co-design curves of %s not found at %s; the run folder goes without them", lens.name, source)
+        return None
+    name = f"curves_{lens.name}_seed{seed}.png".replace("/", "_")
+    shutil.copyfile(source, Path(folder) / name)
     return name

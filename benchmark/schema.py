@@ -16,8 +16,13 @@ output, attack `restorer>reader`), `reference` (a reference measurement such as 
 `raw` image). Rows measured on the sharp scene itself have lens `sharp`. A failed attacker is a
 row with status `failed`, its error, and no metric.
 
+A row may carry its per-unit outcomes (`units`, see `Units`): the value of each scene or plate
+it was scored on, keyed by ids that are the same for every lens of the same profile, scene set and
+seed, so that two lenses are compared on the same scenes and plates (benchmark.findings).
+
 Version history of results.json: 1 = flat rows (kind inferred from the attack's name), migrated
-by `migrate_legacy_row`; 2 = this schema.
+by `migrate_legacy_row`; 2 = this schema (`units` is optional: rows written before it existed
+read with `units` None, "no per-unit outcomes").
 """
 
 from __future__ import annotations
@@ -25,7 +30,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from collections.abc import Iterable, Mapping
+import re
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -37,9 +43,12 @@ __all__ = [
     "SCHEMA_VERSION",
     "SHARP_LENS",
     "STAGES",
+    "UNIT_KINDS",
     "Results",
     "Row",
     "RowError",
+    "Units",
+    "dumps_compact",
     "infer_legacy_kind",
     "migrate_legacy_row",
     "ok_rows",
@@ -81,6 +90,109 @@ class RowError:
         return dataclasses.asdict(self)
 
 
+UNIT_KINDS = ("scene", "plate")
+# Per-unit floats are stored to this many decimals (PSNR to 1e-4 dB, SSIM to 1e-4): far below any
+# difference a paired test can resolve, and it keeps the committed leaderboard entries small.
+UNIT_DECIMALS = 4
+
+
+@dataclasses.dataclass(frozen=True)
+class Units:
+    """Per-unit outcomes of one row: what each scene or plate scored, in a stable order.
+
+    Attributes:
+        unit: "scene" (restorer and utility rows: one val scene each) or "plate" (reader and chain
+            rows: one readable plate each).
+        prefix: Common prefix of the unit names (e.g. "synthetic/val/0/"), stored once.
+        ids: The rest of each unit's name: ``prefix + id`` is the scene's name (``Scene.name``,
+            deterministic from scene set, split, run seed and index, whatever the lens), and for a
+            plate ``{scene name}#{k}``, the k-th readable plate of that scene (or plate window).
+        values: Name -> one value per id: floats rounded to UNIT_DECIMALS (``psnr_db``, ``ssim``),
+            ints (plates: ``correct`` 0/1, ``char_errors`` = edit distance to the truth), or per
+            scene one int per class (utility: ``intersection``, ``union`` pixel counts, from which
+            the pooled mIoU of any subset of scenes is recomputed exactly).
+    """
+
+    unit: str
+    prefix: str
+    ids: tuple[str, ...]
+    values: dict[str, tuple[Any, ...]]
+
+    def __post_init__(self) -> None:
+        if self.unit not in UNIT_KINDS:
+            raise ValueError(f"Units.unit {self.unit!r} is not one of {UNIT_KINDS}")
+        object.__setattr__(self, "ids", tuple(str(i) for i in self.ids))
+        if len(set(self.ids)) != len(self.ids):
+            raise ValueError(f"Units ids must be unique, got {len(self.ids) - len(set(self.ids))} duplicate(s)")
+        values = {}
+        for name, column in self.values.items():
+            column = tuple(_unit_value(name, v) for v in column)
+            if len(column) != len(self.ids):
+                raise ValueError(f"Units value {name!r} has {len(column)} entries for {len(self.ids)} ids")
+            values[str(name)] = column
+        object.__setattr__(self, "values", values)
+
+    @classmethod
+    def from_names(cls, unit: str, names: Sequence[str], values: Mapping[str, Sequence[Any]]) -> Units:
+        """Units of the full unit names `names` (their common prefix up to a "/" is factored out)."""
+        prefix = _common_prefix(names)
+        return cls(unit, prefix, tuple(n[len(prefix):] for n in names), {k: tuple(v) for k, v in values.items()})
+
+    def names(self) -> tuple[str, ...]:
+        """The full unit names (prefix + id), the keys units are paired by."""
+        return tuple(self.prefix + i for i in self.ids)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"unit": self.unit, "prefix": self.prefix, "ids": list(self.ids),
+                "values": {k: [list(v) if isinstance(v, tuple) else v for v in col] for k, col in self.values.items()}}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> Units:
+        missing = {"unit", "prefix", "ids", "values"} - set(d)
+        if missing:
+            raise ValueError(f"units lack field(s) {sorted(missing)}")
+        return cls(str(d["unit"]), str(d["prefix"]), tuple(d["ids"]), {k: tuple(v) for k, v in d["values"].items()})
+
+
+def _unit_value(name: str, value: Any) -> Any:
+    """A per-unit value as stored: an int stays an int, a float is rounded, a list becomes a tuple of ints."""
+    if isinstance(value, (list, tuple)):
+        if not all(isinstance(v, int) and not isinstance(v, bool) for v in value):
+            raise ValueError(f"Units value {name!r}: a per-unit list must hold ints (counts), got {value!r:.80}")
+        return tuple(value)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"Units value {name!r} must be a number or a list of counts, got {value!r:.80}")
+    if isinstance(value, int):
+        return value
+    if not math.isfinite(value):
+        raise ValueError(f"Units value {name!r} is {value}; leave a unit that cannot be scored out instead")
+    return round(float(value), UNIT_DECIMALS)
+
+
+def _common_prefix(names: Sequence[str]) -> str:
+    """The longest common prefix of `names` that ends at a "/" ("" when there is none)."""
+    if not names:
+        return ""
+    first, last = min(names), max(names)
+    n = 0
+    while n < min(len(first), len(last)) and first[n] == last[n]:
+        n += 1
+    return first[:first.rfind("/", 0, n) + 1] if n else ""
+
+
+# Arrays of numbers that json.dumps(indent=...) spread over lines: only whitespace, digits, signs,
+# points, exponents and commas between brackets, starting with a line break (a JSON string never
+# holds a raw line break, so no string is touched).
+_NUMBER_ARRAY = re.compile(r"\[\s*\n[\s0-9eE.+\-,]*\]")
+
+
+def dumps_compact(obj: Any, **kwargs: Any) -> str:
+    """``json.dumps(obj, indent=1, allow_nan=False, **kwargs)`` with every array of numbers on one line
+    (per-unit outcomes would otherwise take one line per number)."""
+    text = json.dumps(obj, indent=1, allow_nan=False, **kwargs)
+    return _NUMBER_ARRAY.sub(lambda m: re.sub(r"\s+", "", m.group(0)), text)
+
+
 @dataclasses.dataclass
 class Row:
     """One result row (see the module docstring for the kinds).
@@ -102,6 +214,8 @@ class Row:
         notes: Name -> text, facts that are not numbers (e.g. the bound's assumptions).
         settings_hash: Key of the lens + attacker settings in results.json's "settings".
         provenance: git_commit, packages, python, device, threads, date, wall_s.
+        units: Per-unit outcomes (per scene or per plate, see `Units`), or None when the row
+            does not carry them (lens and bound rows; rows written before they existed).
     """
 
     kind: str
@@ -121,6 +235,7 @@ class Row:
     notes: dict[str, str] = dataclasses.field(default_factory=dict)
     settings_hash: str = ""
     provenance: dict[str, Any] = dataclasses.field(default_factory=dict)
+    units: Units | None = None
 
     def __post_init__(self) -> None:
         self.metrics = {str(k): _finite(k, v) for k, v in self.metrics.items()}
@@ -168,6 +283,10 @@ class Row:
             low, high = self.intervals[name]
             if not low <= high:
                 raise ValueError(f"interval of {name!r} has low {low} > high {high}")
+        if self.units is not None and not isinstance(self.units, Units):
+            raise ValueError(f"Row.units must be a schema.Units or None, got {type(self.units).__name__}")
+        if self.units is not None and self.status == "failed":
+            raise ValueError(f"failed row {self.lens}/{self.attack}: carries no per-unit outcomes")
 
     # ---- reading ------------------------------------------------------------------------------
 
@@ -191,6 +310,11 @@ class Row:
         self.interval_methods[name] = method
         self.validate()
 
+    def set_units(self, units: Units) -> None:
+        """Attach the row's per-unit outcomes (scenes or plates, see `Units`)."""
+        self.units = units
+        self.validate()
+
     # ---- serialisation ------------------------------------------------------------------------
 
     def to_json(self) -> dict[str, Any]:
@@ -198,6 +322,7 @@ class Row:
         d = dataclasses.asdict(self)
         d["error"] = None if self.error is None else self.error.to_json()
         d["intervals"] = {k: list(v) for k, v in self.intervals.items()}
+        d["units"] = None if self.units is None else self.units.to_json()
         return d
 
     @classmethod
@@ -214,6 +339,8 @@ class Row:
         if fields.get("error") is not None:
             fields["error"] = RowError(**fields["error"])
         fields["intervals"] = {k: tuple(v) for k, v in (fields.get("intervals") or {}).items()}
+        if fields.get("units") is not None:
+            fields["units"] = Units.from_json(fields["units"])
         return cls(**fields)
 
     def flat(self) -> dict[str, Any]:
@@ -296,7 +423,7 @@ class Results:
 def write_results(path: Path, results: Results) -> Path:
     """Write `results` to `path` (atomically, strict JSON)."""
     path = Path(path)
-    atomic_write_text(path, json.dumps(results.to_json(), indent=1, default=str, allow_nan=False) + "\n")
+    atomic_write_text(path, dumps_compact(results.to_json(), default=str) + "\n")
     return path
 
 

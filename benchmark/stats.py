@@ -10,7 +10,10 @@ their intervals to rows and the leaderboard decides each finding with a paired c
   interval of the mean over scenes resampled with replacement (scenes are the independent
   units; pixels and plates within a scene are not).
 - Two attackers or lenses on the same scenes: ``paired_bootstrap`` resamples the scenes once
-  for both, so the between-scene spread they share cancels in the difference.
+  for both, so the between-scene spread they share cancels in the difference;
+  ``stratified_paired_bootstrap`` does the same for any statistic of the units (a pooled mIoU
+  from per-scene counts, the strongest of several restorers' mean PSNR) with the units of each
+  seed resampled within their seed.
 - Two readers on the same plates: ``mcnemar_exact`` (only the discordant plates carry
   information on the difference) and ``paired_accuracy_difference`` (the difference in
   accuracy with Newcombe's interval for paired proportions).
@@ -22,7 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Literal
 
 import numpy as np
@@ -39,6 +42,7 @@ __all__ = [
     "mcnemar_exact",
     "paired_accuracy_difference",
     "paired_bootstrap",
+    "stratified_paired_bootstrap",
     "verdict",
     "wilson_interval",
 ]
@@ -208,6 +212,64 @@ def paired_bootstrap(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.nd
     above = (np.count_nonzero(means >= 0.0) + 1) / (n_resamples + 1)
     return Comparison(float(differences.mean()), float(low), float(high), min(1.0, 2.0 * min(below, above)),
                       "paired-bootstrap", int(differences.size), confidence)
+
+
+Statistic = Callable[[Sequence[np.ndarray]], float]
+
+
+def stratified_paired_bootstrap(a: Sequence[np.ndarray], b: Sequence[np.ndarray], statistic: Statistic,
+                                confidence: float = 0.95, n_resamples: int = 4000, seed: int = 0,
+                                method: str = "paired-bootstrap") -> Comparison:
+    """Paired bootstrap of ``statistic(a) - statistic(b)`` with units resampled within strata.
+
+    Each stratum (one seed) holds the same units for both sides, in the same order: unit i of
+    ``a[s]`` and of ``b[s]`` is one scene (or plate) measured under A and under B. A resample draws
+    each stratum's units with replacement, keeping its size, and applies the same draw to both
+    sides, so whatever the units share cancels in the difference.
+
+    Args:
+        a, b: Per stratum an array (n_s, ...) of per-unit values (n_s >= 1; ``a[s].shape[0] ==
+            b[s].shape[0]``); the trailing shape may differ between strata only where
+            ``statistic`` allows it.
+        statistic: Maps the strata of one side (a list of arrays, one per stratum) to a float,
+            e.g. the mean over strata of each stratum's pooled mIoU.
+        confidence, n_resamples, seed: As ``paired_bootstrap``.
+        method: Name recorded in the returned ``Comparison``.
+
+    Returns:
+        ``Comparison`` of the observed difference with the percentile interval and the two-sided
+        bootstrap p-value of ``paired_bootstrap``, never below ``2 ** (1 - n)``: the smallest
+        two-sided p-value an exact paired (sign-flip) test can reach with n units. On a handful
+        of units the percentile bootstrap is overconfident (two scenes that both favour A put
+        every resample on A's side), and no finding may rest on that. ``n`` is the number of
+        paired units over all strata.
+    """
+    _check_confidence(confidence)
+    if n_resamples < 1:
+        raise ValueError(f"n_resamples must be >= 1, got {n_resamples}")
+    if len(a) != len(b) or not a:
+        raise ValueError(f"a and b need the same number (>= 1) of strata, got {len(a)} and {len(b)}")
+    first = [np.asarray(x) for x in a]
+    second = [np.asarray(x) for x in b]
+    for s, (x, y) in enumerate(zip(first, second)):
+        if x.shape[0] != y.shape[0] or x.shape[0] == 0:
+            raise ValueError(f"stratum {s}: a and b must hold the same units (>= 1), got {x.shape[0]} and {y.shape[0]}")
+    observed = float(statistic(first) - statistic(second))
+    rng = np.random.default_rng(seed)
+    differences = np.empty(n_resamples)
+    for i in range(n_resamples):
+        draws = [rng.integers(0, x.shape[0], size=x.shape[0]) for x in first]
+        differences[i] = statistic([x[d] for x, d in zip(first, draws)]) - statistic([y[d] for y, d in zip(second, draws)])
+    differences = differences[np.isfinite(differences)]
+    if differences.size == 0:
+        raise ValueError("the statistic is undefined on every resample; check the per-unit values")
+    tail = (1.0 - confidence) / 2.0
+    low, high = np.quantile(differences, [tail, 1.0 - tail])
+    below = (np.count_nonzero(differences <= 0.0) + 1) / (differences.size + 1)
+    above = (np.count_nonzero(differences >= 0.0) + 1) / (differences.size + 1)
+    n = int(sum(x.shape[0] for x in first))
+    p_value = min(1.0, max(2.0 * min(below, above), 2.0 ** (1 - n)))
+    return Comparison(observed, float(low), float(high), p_value, method, n, confidence)
 
 
 def mcnemar_exact(b: int, c: int) -> float:

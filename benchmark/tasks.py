@@ -35,8 +35,8 @@ from benchmark.planning import AttackerRef, Task, fit_task
 from benchmark.plate_scoring import readable
 from benchmark.plate_spectrum import cached_plate_spectrum
 from benchmark.provenance import provenance
-from benchmark.rows import RowBuilder
-from benchmark.run_pictures import plate_gallery, sample_grid
+from benchmark.rows import RowBuilder, training_facts, utility_units
+from benchmark.run_pictures import plate_gallery, sample_grid, training_curves
 from benchmark.run_config import RunConfig, training_scenes
 from benchmark.scenes import Scene, load_scene, load_scenes, plate_entropy_bits
 from benchmark.scenes.windows import plate_windows, window_scene
@@ -253,6 +253,7 @@ def _sharp(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
         metrics, confusion = utility_scores(clean, sharp, scenes, cfg)
         row = builder.row("utility", metrics)
         utility_intervals(row, confusion)
+        row.set_units(utility_units(scenes, confusion))
         rows.append(row)
     segment = segmenter(clean, cfg) if clean is not None else None
     target = Target("sharp", scenes, sharp, sharp, fit_context(None, cfg, task.seed, segment), segment, segment,
@@ -265,7 +266,7 @@ def _sharp(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     return TaskResult(out.rows, builder.settings, out.plates)
 
 
-def _lens_task(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
+def _lens_task(task: Task, cfg: RunConfig, staging: Path) -> TaskResult:
     t0 = time.perf_counter()
     lens = _lens(cfg, task.lens, task.seed)
     fit_s = time.perf_counter() - t0
@@ -277,8 +278,11 @@ def _lens_task(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
                "psf_energy": float(lens.psf_and_energy()[1].min())}
     builder = _builder(cfg, task.lens, task.seed, lens)
     spec = lens.current_spec()
-    return TaskResult([builder.row("lens", metrics)], builder.settings,
-                      meta={"coefficients_um": list(spec.mask.zernike_um), "spec": spec.to_dict()})
+    facts, notes = training_facts(getattr(lens, "training_record", None))
+    curves = training_curves(lens, task.seed, cfg.cache_dir, staging)
+    return TaskResult([builder.row("lens", {**metrics, **facts}, notes=notes)], builder.settings,
+                      meta={"coefficients_um": list(spec.mask.zernike_um), "spec": spec.to_dict(),
+                            "pictures": [curves] if curves else []})
 
 
 def _utility(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
@@ -292,6 +296,7 @@ def _utility(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     builder = _builder(cfg, task.lens, task.seed, lens)
     row = builder.row("utility", {**metrics, "fit_s": fit_s})
     utility_intervals(row, confusion)
+    row.set_units(utility_units(scenes, confusion))
     return TaskResult([row], builder.settings)
 
 

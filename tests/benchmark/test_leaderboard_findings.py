@@ -1,51 +1,163 @@
-"""The paper's findings table is computed from the entries: its verdicts follow the numbers."""
+"""The findings table decides each claim by a paired comparison of per-unit outcomes (benchmark.findings)."""
 
+import numpy as np
+import pytest
+from scipy import stats as sps
+
+from benchmark import findings, stats
 from benchmark.leaderboard_entries import make_entry
-from benchmark.leaderboard_tables import findings_table
-from benchmark.schema import Row
+from benchmark.leaderboard_tables import findings_lines, findings_table
+from benchmark.schema import Row, Units
+
+PROFILE = "quick"
 
 
-def _row(lens: str, kind: str, attack: str, seed: int, metrics: dict) -> Row:
-    return Row(kind=kind, lens=lens, attack=attack, restorer=None if kind == "utility" else attack, seed=seed,
-               profile="quick", scenes="synthetic", metrics=metrics)
+def _scene_names(seed: int, n: int) -> list[str]:
+    return [f"synthetic/val/{seed}/{i:05d}" for i in range(n)]
 
 
-def _entry(lens: str, miou: list[float], psnr: list[float]):
-    rows = [_row(lens, "utility", "utility", s, {"miou": v}) for s, v in enumerate(miou)]
-    rows += [_row(lens, "restorer", "wiener-known-psf", s, {"psnr_db": v}) for s, v in enumerate(psnr)]
-    return make_entry(lens, rows, {"name": "quick"}, None, None)
+def _restorer(lens: str, attack: str, seed: int, psnr: np.ndarray, units: bool = True) -> Row:
+    row = Row(kind="restorer", lens=lens, attack=attack, restorer=attack, seed=seed, profile=PROFILE,
+              scenes="synthetic", metrics={"psnr_db": float(np.mean(psnr))})
+    if units:
+        row.set_units(Units.from_names("scene", _scene_names(seed, len(psnr)), {"psnr_db": psnr.tolist()}))
+    return row
 
 
-def _verdicts(entries):
-    rows = [line.split(" | ") for line in findings_table(entries).splitlines()[2:]]
-    return {row[1]: row[-1].rstrip(" |") for row in rows}
+def _utility(lens: str, seed: int, inter: np.ndarray, union: np.ndarray) -> Row:
+    present = union.sum(0) > 0
+    miou = float((inter.sum(0)[present] / union.sum(0)[present]).mean())
+    row = Row(kind="utility", lens=lens, attack="utility", seed=seed, profile=PROFILE, scenes="synthetic",
+              metrics={"miou": miou})
+    row.set_units(Units.from_names("scene", _scene_names(seed, len(inter)),
+                                   {"intersection": inter.tolist(), "union": union.tolist()}))
+    return row
 
 
-def test_verdicts_follow_the_numbers_and_their_spread():
-    verdicts = _verdicts([
-        _entry("os-d-1", [0.30, 0.32, 0.31], [30.0, 30.2, 29.8]),
-        _entry("os-d-1000", [0.20, 0.21, 0.19], [22.0, 22.1, 21.9]),
-        _entry("gp", [0.20, 0.40, 0.30], [22.0, 22.5, 21.5]),
-        _entry("os-d-mtadam", [0.3, 0.3, 0.3], [21.0, 21.1, 20.9]),
-    ])
-    assert verdicts["more lambda_deb costs utility"] == "holds"
-    assert verdicts["more lambda_deb lowers the attacker's PSNR"] == "holds"
-    assert verdicts["GP gives lambda_deb = 1000 privacy (attacker PSNR no higher)"] == "holds"
-    assert verdicts["GP keeps more utility than lambda_deb = 1000"] == "within seed noise"
-    assert verdicts["MTAdam gives weaker privacy than lambda_deb = 1000"] == "does not hold"
+def _reader(lens: str, seed: int, correct: np.ndarray) -> Row:
+    names = [f"synthetic/val/{seed}/{i // 2:05d}@x0y0p{i % 2}#0" for i in range(len(correct))]
+    row = Row(kind="reader", lens=lens, attack="lpdr", reader="lpdr", seed=seed, profile=PROFILE, scenes="synthetic",
+              metrics={"plate_acc": float(np.mean(correct)), "n_plates": len(correct)})
+    row.set_units(Units.from_names("plate", names, {"correct": correct.astype(int).tolist(),
+                                                    "char_errors": (1 - correct).astype(int).tolist()}))
+    return row
 
 
-def test_single_seeds_are_flagged_and_missing_lenses_skipped():
-    verdicts = _verdicts([_entry("gp", [0.3], [25.0]), _entry("os-d-1000", [0.2], [22.0])])
-    assert verdicts["GP gives lambda_deb = 1000 privacy (attacker PSNR no higher)"] == "does not hold (one seed: no spread)"
-    assert set(verdicts) == {"GP gives lambda_deb = 1000 privacy (attacker PSNR no higher)",
-                             "GP keeps more utility than lambda_deb = 1000"}
-    assert findings_table([_entry("ideal", [0.3], [25.0])]) == ""
+def _entry(lens: str, rows: list[Row]):
+    return make_entry(lens, rows, {"name": PROFILE}, None, None)
 
 
-def test_attackers_only_one_lens_met_do_not_decide():
-    strong = _entry("os-d-1000", [0.2], [22.0])
-    strong = make_entry("os-d-1000", strong.rows + [_row("os-d-1000", "restorer", "nafnet-known-pairs", 0,
-                                                         {"psnr_db": 35.0})], {"name": "quick"}, None, None)
-    verdicts = _verdicts([_entry("gp", [0.3], [21.0]), strong])
-    assert verdicts["GP gives lambda_deb = 1000 privacy (attacker PSNR no higher)"] == "holds (one seed: no spread)"
+def _psnr_entries(n_scenes: int, shift: float, seeds=(0, 1, 2)):
+    """gp's restorer reaches `shift` dB less than os-d-1000's on the same scenes (which differ a lot)."""
+    rng = np.random.default_rng(3)
+    gp, strong = [], []
+    for s in seeds:
+        scenes = rng.normal(25.0, 4.0, size=n_scenes)
+        gp.append(_restorer("gp", "wiener-known-psf", s, scenes - shift + rng.normal(0, 1.5, n_scenes)))
+        strong.append(_restorer("os-d-1000", "wiener-known-psf", s, scenes + rng.normal(0, 1.5, n_scenes)))
+    return [_entry("gp", gp), _entry("os-d-1000", strong)]
+
+
+def _finding(entries, claim: str):
+    return next(f for f in findings.check_findings(entries) if f.claim == claim)
+
+
+PSNR_CLAIM = "GP gives lambda_deb = 1000 privacy (attacker PSNR no higher)"
+
+
+def test_psnr_verdict_is_paired_and_flips_to_cannot_tell_when_the_sample_shrinks():
+    big = _finding(_psnr_entries(64, 0.5), PSNR_CLAIM)
+    assert big.label == stats.HOLDS
+    assert big.comparison is not None and big.comparison.n == 3 * 64
+    assert big.comparison.method == "paired-bootstrap" and big.comparison.high < 0
+    # Unpaired, the 4 dB scene spread would give an interval about 1.7 dB wide; paired, it cancels.
+    assert big.comparison.high - big.comparison.low < 1.0
+    small = _finding(_psnr_entries(8, 0.5, seeds=(0,)), PSNR_CLAIM)
+    assert small.label == stats.CANNOT_TELL and small.comparison is not None and small.comparison.n == 8
+    assert "p = " in small.verdict and "n = 8" in small.verdict
+    worse = _finding(_psnr_entries(64, -0.5), PSNR_CLAIM)
+    assert worse.label == stats.DOES_NOT_HOLD
+
+
+def test_worst_case_is_the_strongest_restorer_both_lenses_met():
+    rng = np.random.default_rng(0)
+    scenes = rng.normal(25.0, 3.0, size=40)
+    gp = [_restorer("gp", "wiener-known-psf", 0, scenes - 2.0), _restorer("gp", "nafnet", 0, scenes + 1.0)]
+    strong = [_restorer("os-d-1000", "wiener-known-psf", 0, scenes), _restorer("os-d-1000", "nafnet", 0, scenes - 3.0),
+              _restorer("os-d-1000", "only-here", 0, scenes + 10.0)]
+    found = _finding([_entry("gp", gp), _entry("os-d-1000", strong)], PSNR_CLAIM)
+    # gp's worst case is nafnet (scenes + 1), os-d-1000's wiener (scenes); "only-here" never ran on gp.
+    assert (found.attack_a, found.attack_b) == ("nafnet", "wiener-known-psf")
+    assert found.comparison is not None and found.comparison.difference == pytest.approx(1.0, abs=1e-3)
+    assert found.label == stats.DOES_NOT_HOLD
+
+
+def test_miou_is_recomputed_from_per_scene_counts():
+    rng = np.random.default_rng(1)
+    union = rng.integers(0, 5000, size=(32, 19))
+    union[:, 7] = 0  # a class absent from every scene is left out of the mean
+    gp_inter = (union * rng.uniform(0.3, 0.6, size=union.shape)).astype(int)
+    os_inter = (union * rng.uniform(0.1, 0.4, size=union.shape)).astype(int)
+    entries = [_entry("gp", [_utility("gp", 0, gp_inter, union)]),
+               _entry("os-d-1000", [_utility("os-d-1000", 0, os_inter, union)])]
+    found = _finding(entries, "GP keeps more utility than lambda_deb = 1000")
+    expected = entries[0].metric("utility", "miou").mean - entries[1].metric("utility", "miou").mean
+    assert found.comparison is not None and found.comparison.difference == pytest.approx(expected, abs=1e-12)
+    assert found.label == stats.HOLDS
+    # The statistic on one stratum is the pooled mIoU itself.
+    stacked = np.stack([gp_inter, union], axis=1)
+    assert findings._miou([stacked]) == pytest.approx(entries[0].metric("utility", "miou").mean, abs=1e-12)
+
+
+def test_plate_reads_are_decided_by_mcnemar_on_the_same_plates():
+    # 60 plates: both read 20, only gp 4, only os 16, neither 20 -> gp reads fewer.
+    gp = np.array([1] * 20 + [1] * 4 + [0] * 16 + [0] * 20)
+    os = np.array([1] * 20 + [0] * 4 + [1] * 16 + [0] * 20)
+    entries = [_entry("gp", [_reader("gp", 0, gp)]), _entry("os", [_reader("os", 0, os)])]
+    found = _finding(entries, "GP lowers the best reader's plate accuracy against OS")
+    assert found.comparison is not None and found.comparison.n == 60
+    assert found.comparison.p_value == pytest.approx(sps.binomtest(4, 20, 0.5).pvalue)
+    assert found.comparison.difference == pytest.approx((4 - 16) / 60)
+    assert found.label == stats.HOLDS
+    # A quarter of the plates, the same rates: too few discordant plates to tell.
+    quarter = np.r_[0:5, 20:21, 24:28, 40:45]
+    entries = [_entry("gp", [_reader("gp", 0, gp[quarter])]), _entry("os", [_reader("os", 0, os[quarter])])]
+    assert _finding(entries, "GP lowers the best reader's plate accuracy against OS").label == stats.CANNOT_TELL
+
+
+def test_plates_pair_by_id_not_by_position():
+    gp = np.array([1, 0, 1, 0, 1, 0, 1, 0])
+    a, b = _reader("gp", 0, gp), _reader("os", 0, gp)
+    # The same outcomes listed in another order on one side: every plate agrees.
+    order = [7, 6, 5, 4, 3, 2, 1, 0]
+    names = b.units.names()
+    b.set_units(Units.from_names("plate", [names[i] for i in order],
+                                 {k: [v[i] for i in order] for k, v in b.units.values.items()}))
+    found = _finding([_entry("gp", [a]), _entry("os", [b])], "GP lowers the best reader's plate accuracy against OS")
+    assert found.comparison is not None and found.comparison.difference == 0.0 and found.comparison.p_value == 1.0
+
+
+def test_entries_without_units_say_so_and_never_pair():
+    rng = np.random.default_rng(0)
+    old = _entry("gp", [_restorer("gp", "wiener-known-psf", 0, rng.normal(20, 1, 8), units=False)])
+    new = _entry("os-d-1000", [_restorer("os-d-1000", "wiener-known-psf", 0, rng.normal(30, 1, 8))])
+    found = _finding([old, new], PSNR_CLAIM)
+    assert found.comparison is None and found.label == stats.CANNOT_TELL
+    assert found.verdict == findings.NO_UNITS
+    line = next(x for x in findings_lines([old, new]) if x[1] == PSNR_CLAIM)
+    assert line[-1] == "cannot tell: entry has no per-unit outcomes (re-publish)" and line[6] == ""
+
+
+def test_different_scenes_are_not_paired():
+    rng = np.random.default_rng(0)
+    a = _restorer("gp", "wiener-known-psf", 0, rng.normal(20, 1, 8))
+    b = _restorer("os-d-1000", "wiener-known-psf", 0, rng.normal(30, 1, 8))
+    b.set_units(Units.from_names("scene", [f"photos/val/0/{i:05d}" for i in range(8)], b.units.values))
+    found = _finding([_entry("gp", [a]), _entry("os-d-1000", [b])], PSNR_CLAIM)
+    assert found.comparison is None and "share no scene or plate id" in found.verdict
+
+
+def test_missing_lenses_are_skipped():
+    assert findings_table(_psnr_entries(4, 0.0)[:1]) == ""
+    claims = {f.claim for f in findings.check_findings(_psnr_entries(4, 0.0))}
+    assert claims == {PSNR_CLAIM}  # no utility or reader rows: only the PSNR claim applies

@@ -138,3 +138,48 @@ def test_verdict_flips_to_cannot_tell_when_the_sample_shrinks():
 def test_verdict_rejects_bad_direction():
     with pytest.raises(ValueError, match="direction"):
         stats.verdict(stats.paired_accuracy_difference(1, 1, 1, 1), "bigger")  # type: ignore[arg-type]
+
+
+def _mean_of_strata(strata):
+    return float(np.mean([x.mean() for x in strata]))
+
+
+def test_stratified_paired_bootstrap_known_answers():
+    rng = np.random.default_rng(4)
+    b = [rng.normal(20.0, 5.0, size=n) for n in (30, 12, 50)]   # seeds of different sizes, scenes differ a lot
+    shifted = stats.stratified_paired_bootstrap([x + 0.7 for x in b], b, _mean_of_strata, n_resamples=1000)
+    # A constant difference: every resample gives it exactly (a degenerate interval).
+    assert shifted.difference == pytest.approx(0.7)
+    assert (shifted.low, shifted.high) == (pytest.approx(0.7), pytest.approx(0.7))
+    assert shifted.p_value == pytest.approx(2 / 1001) and shifted.n == 92
+    # Differences symmetric about zero within each seed: the interval covers 0, nothing to tell.
+    null = stats.stratified_paired_bootstrap([x + np.tile([0.5, -0.5], len(x) // 2) for x in b], b,
+                                             _mean_of_strata, n_resamples=2000)
+    assert null.difference == pytest.approx(0.0, abs=1e-12) and null.low < 0 < null.high and null.p_value > 0.5
+    assert stats.verdict(null, "greater").label == stats.CANNOT_TELL
+
+
+def test_stratified_paired_bootstrap_matches_the_paired_bootstrap_on_one_stratum():
+    rng = np.random.default_rng(8)
+    b = rng.normal(25.0, 4.0, size=120)
+    a = b + 0.3 + rng.normal(0.0, 1.0, size=120)
+    ours = stats.stratified_paired_bootstrap([a], [b], _mean_of_strata, n_resamples=20_000, seed=1)
+    reference = stats.paired_bootstrap(a, b, n_resamples=20_000, seed=2)
+    assert ours.difference == pytest.approx(reference.difference)
+    assert abs(ours.low - reference.low) < 0.03 and abs(ours.high - reference.high) < 0.03
+    assert abs(ours.p_value - reference.p_value) < 0.01 + 0.2 * reference.p_value
+
+
+def test_stratified_paired_bootstrap_never_claims_more_than_n_units_allow():
+    # Two scenes that both favour A: every resample does, yet two units cannot show p < 0.5.
+    result = stats.stratified_paired_bootstrap([np.array([21.0, 22.0])], [np.array([20.0, 20.5])], _mean_of_strata,
+                                               n_resamples=500)
+    assert result.low > 0 and result.p_value == pytest.approx(0.5)
+    assert stats.verdict(result, "greater").label == stats.CANNOT_TELL
+
+
+def test_stratified_paired_bootstrap_names_bad_input():
+    with pytest.raises(ValueError, match="stratum 0"):
+        stats.stratified_paired_bootstrap([np.zeros(3)], [np.zeros(4)], _mean_of_strata)
+    with pytest.raises(ValueError, match="strata"):
+        stats.stratified_paired_bootstrap([np.zeros(3)], [], _mean_of_strata)
