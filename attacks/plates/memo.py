@@ -1,0 +1,89 @@
+"""What the plate attack's deterministic stages computed, remembered by the content of their input.
+
+The runner reads plates with two readers (``lpdr``, ``lpdr-oracle``) on the sensor images and on
+every restorer's output: a dozen chains over the same plate windows. Two stages are pure functions
+of what they are given, so their results are remembered per process and reused whenever the same
+input comes back, whichever chain or reader asks:
+
+* vehicles (``lpdr``): the segmentation of an image, per segmenter and image content
+  (``vehicles_memo``). An attacker finds vehicles on the image it attacks, with the network its
+  threat model gives it: the lens's own network on sensor images, the clean one on restored
+  images (``benchmark.evaluation.run_reader``). So boxes are shared only between requests for the
+  same network on byte-identical images: the chain whose restorer returns the sensor image
+  unchanged (``raw``) and a reader run twice on one image. Boxes are never carried from one image to
+  another (e.g. from the sensor image to a restorer's output, or from a frame to its windows): that
+  would hand an attacker vehicles from an image or a network it does not attack with, and change
+  what it reads.
+* characters (OCR): english_g2's raw string and confidence for one plate crop, per recognizer and
+  crop content (``ocr_memo``). Each crop's read is bit-identical whatever it is batched with
+  (``attacks.plates.ocr.SharedFeatures``), so the same pixels give the same read in any chain:
+  ``raw>lpdr-oracle`` re-reads exactly the crops of ``lpdr-oracle``, and ``lpdr`` and
+  ``lpdr-oracle`` often cut the same plate box from one image.
+
+A remembered result is exactly the one the stage would compute again, so the reads, and every
+score made of them, are unchanged; only the time is saved. Tables are held weakly by the
+segmenter / recognizer they belong to and live as long as it does. ``forgetting()`` turns the
+memory off (to measure the stages themselves).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import weakref
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+from torch import Tensor
+
+__all__ = ["content_key", "forgetting", "ocr_memo", "remembering", "vehicles_memo"]
+
+Box = tuple[int, int, int, int]
+
+_VEHICLES: weakref.WeakKeyDictionary[Any, dict[str, list[Box]]] = weakref.WeakKeyDictionary()
+_OCR: weakref.WeakKeyDictionary[Any, dict[str, tuple[str, float]]] = weakref.WeakKeyDictionary()
+_ON = [True]
+
+
+def content_key(image: Tensor | np.ndarray) -> str:
+    """Identity of an array's content: BLAKE2b of its shape, dtype and bytes (32 hex digits)."""
+    array = image.detach().cpu().contiguous().numpy() if isinstance(image, Tensor) else np.ascontiguousarray(image)
+    digest = hashlib.blake2b(f"{array.shape}{array.dtype}".encode(), digest_size=16)
+    digest.update(array.tobytes())
+    return digest.hexdigest()
+
+
+def _table(tables: weakref.WeakKeyDictionary[Any, dict], owner: Any) -> dict | None:
+    if not _ON[0]:
+        return None
+    try:
+        return tables.setdefault(owner, {})
+    except TypeError:  # an owner that cannot be referenced weakly: nothing is remembered
+        return None
+
+
+def vehicles_memo(segment: Any) -> dict[str, list[Box]] | None:
+    """Image content key -> vehicle boxes found with ``segment``; None when not remembering."""
+    return _table(_VEHICLES, segment)
+
+
+def ocr_memo(ocr: Any) -> dict[str, tuple[str, float]] | None:
+    """Crop content key -> (raw string, confidence) read by ``ocr``; None when not remembering."""
+    return _table(_OCR, ocr)
+
+
+def remembering() -> bool:
+    """Whether results are remembered now (True unless inside ``forgetting()``)."""
+    return _ON[0]
+
+
+@contextlib.contextmanager
+def forgetting() -> Iterator[None]:
+    """Within the block every stage computes afresh and nothing is remembered or looked up."""
+    before = _ON[0]
+    _ON[0] = False
+    try:
+        yield
+    finally:
+        _ON[0] = before
