@@ -22,8 +22,10 @@ input comes back, whichever chain or reader asks:
 
 A remembered result is exactly the one the stage would compute again, so the reads, and every
 score made of them, are unchanged; only the time is saved. Tables are held weakly by the
-segmenter / recognizer they belong to and live as long as it does. ``forgetting()`` turns the
-memory off (to measure the stages themselves).
+segmenter / recognizer they belong to and live as long as it does (the run's segmenters die with
+their task; the recognizer lives as long as the process, so its table is emptied when it holds
+``MAX_ENTRIES`` reads, about 30 MB). ``forgetting()`` turns the memory off and ``fresh()`` starts an
+empty one (to measure the stages themselves, or what the memory saves).
 """
 
 from __future__ import annotations
@@ -37,12 +39,16 @@ from typing import Any
 import numpy as np
 from torch import Tensor
 
-__all__ = ["content_key", "forgetting", "ocr_memo", "remembering", "vehicles_memo"]
+__all__ = ["MAX_ENTRIES", "content_key", "forgetting", "fresh", "ocr_memo", "vehicles_memo"]
 
 Box = tuple[int, int, int, int]
 
-_VEHICLES: weakref.WeakKeyDictionary[Any, dict[str, list[Box]]] = weakref.WeakKeyDictionary()
-_OCR: weakref.WeakKeyDictionary[Any, dict[str, tuple[str, float]]] = weakref.WeakKeyDictionary()
+MAX_ENTRIES = 100_000
+"""A table holding this many results is emptied before it takes another (bounds a long run's memory)."""
+
+# "vehicles": segmenter -> {image key: boxes}; "ocr": recognizer -> {crop key: (raw, score)}.
+_TABLES: dict[str, weakref.WeakKeyDictionary[Any, dict]] = {"vehicles": weakref.WeakKeyDictionary(),
+                                                            "ocr": weakref.WeakKeyDictionary()}
 _ON = [True]
 
 
@@ -54,28 +60,27 @@ def content_key(image: Tensor | np.ndarray) -> str:
     return digest.hexdigest()
 
 
-def _table(tables: weakref.WeakKeyDictionary[Any, dict], owner: Any) -> dict | None:
+def _table(name: str, owner: Any) -> dict | None:
     if not _ON[0]:
         return None
+    tables = _TABLES[name]
     try:
-        return tables.setdefault(owner, {})
+        table = tables.setdefault(owner, {})
     except TypeError:  # an owner that cannot be referenced weakly: nothing is remembered
         return None
+    if len(table) >= MAX_ENTRIES:
+        table.clear()
+    return table
 
 
 def vehicles_memo(segment: Any) -> dict[str, list[Box]] | None:
     """Image content key -> vehicle boxes found with ``segment``; None when not remembering."""
-    return _table(_VEHICLES, segment)
+    return _table("vehicles", segment)
 
 
 def ocr_memo(ocr: Any) -> dict[str, tuple[str, float]] | None:
     """Crop content key -> (raw string, confidence) read by ``ocr``; None when not remembering."""
-    return _table(_OCR, ocr)
-
-
-def remembering() -> bool:
-    """Whether results are remembered now (True unless inside ``forgetting()``)."""
-    return _ON[0]
+    return _table("ocr", ocr)
 
 
 @contextlib.contextmanager
@@ -87,3 +92,14 @@ def forgetting() -> Iterator[None]:
         yield
     finally:
         _ON[0] = before
+
+
+@contextlib.contextmanager
+def fresh() -> Iterator[None]:
+    """Within the block remember from an empty memory; what was remembered before is back after it."""
+    saved = dict(_TABLES)
+    _TABLES.update({name: weakref.WeakKeyDictionary() for name in saved})
+    try:
+        yield
+    finally:
+        _TABLES.update(saved)
