@@ -165,7 +165,7 @@ class PlateReaderBase(Reader):
             if key not in memo:
                 missing.setdefault(key, crop)
         # Read without the plate syntax: it is the reader's own setting, applied below to every read.
-        for key, result in zip(missing, read_plates(self.ocr, list(missing.values()), None)):
+        for key, result in zip(missing, read_plates(self.ocr, list(missing.values()), None) if missing else []):
             memo[key] = (result.raw, result.score)
         self.ocr_cache_hits += len(keys) - len(missing)
         return [OcrResult(apply_format(normalise(raw), self.plate_format), raw, score)
