@@ -7,14 +7,15 @@ each vehicle's lower part by EasyOCR's CRAFT or an OpenCV morphology detector
 (``plate_detector``); characters by EasyOCR's english_g2 on the upscaled plate crop.
 ``reader.last_trace`` keeps every stage's output of the last ``read`` so that an error can
 be attributed to the stage that made it, and ``reader.stage_seconds`` their cumulative time.
+Segmentations and OCR reads are remembered by input content and shared by every reader and chain
+of a process (``attacks/plates/memo.py``, which argues why that gives no attacker anything it would
+not compute itself): ``vehicle_cache_hits`` and ``ocr_cache_hits`` count what was reused.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import time
-import weakref
 from typing import Any, ClassVar
 
 import numpy as np
@@ -24,10 +25,11 @@ from attacks.base import FitContext, PlateRead, ReadHints, Reader, ThreatModel, 
 from attacks.plates.detect_craft import detect_craft
 from attacks.plates.detect_opencv import detect_opencv
 from attacks.plates.easyocr_models import load_easyocr
-from attacks.plates.ocr import read_plates
+from attacks.plates.memo import content_key, ocr_memo, vehicles_memo
+from attacks.plates.ocr import OcrResult, apply_format, normalise, read_plates
 from attacks.plates.vehicles import expand_box, oracle_vehicles, segmentation_vehicles
 
-__all__ = ["Lpdr", "LpdrCraft", "LpdrOracle", "PlateReaderBase", "StageTrace"]
+__all__ = ["Lpdr", "LpdrCraft", "LpdrOracle", "PlateReaderBase", "StageTrace", "content_key"]
 
 Box = tuple[int, int, int, int]
 PLATE_DETECTORS = ("craft", "opencv")
@@ -96,6 +98,7 @@ class PlateReaderBase(Reader):
         self.stage_seconds: dict[str, float] = dict.fromkeys(STAGES, 0.0)
         self.images_read = 0
         self.vehicle_cache_hits = 0
+        self.ocr_cache_hits = 0
         self._ocr: Any = None
 
     def fit(self, ctx: FitContext) -> None:
@@ -132,7 +135,7 @@ class PlateReaderBase(Reader):
             traces.append(trace)
             crops.append(image_crops)
         t0 = time.perf_counter()
-        results = iter(read_plates(self.ocr, [c for image_crops in crops for c in image_crops], self.plate_format))
+        results = iter(self._recognise([c for image_crops in crops for c in image_crops]))
         self.stage_seconds["ocr"] += time.perf_counter() - t0
         for trace in traces:
             candidates = []
@@ -149,6 +152,24 @@ class PlateReaderBase(Reader):
 
     def _vehicles(self, images: Tensor, hints: ReadHints | None) -> list[list[Box]]:
         raise NotImplementedError
+
+    def _recognise(self, crops: list[np.ndarray]) -> list[OcrResult]:
+        """Stage 3 on (h, w, 3) uint8 plate crops: what ``read_plates`` reads, each distinct crop read once
+        per process (``ocr_memo``; identical crops read alike in any batch, see ``SharedFeatures``)."""
+        memo = ocr_memo(self.ocr)
+        if memo is None:
+            return read_plates(self.ocr, crops, self.plate_format)
+        keys = [content_key(c) for c in crops]
+        missing: dict[str, np.ndarray] = {}
+        for key, crop in zip(keys, crops):
+            if key not in memo:
+                missing.setdefault(key, crop)
+        # Read without the plate syntax: it is the reader's own setting, applied below to every read.
+        for key, result in zip(missing, read_plates(self.ocr, list(missing.values()), None) if missing else []):
+            memo[key] = (result.raw, result.score)
+        self.ocr_cache_hits += len(keys) - len(missing)
+        return [OcrResult(apply_format(normalise(raw), self.plate_format), raw, score)
+                for raw, score in (memo[key] for key in keys)]
 
     def _find_plates(self, image: np.ndarray, vehicles: list[Box]) -> tuple[StageTrace, list[np.ndarray]]:
         """Stages 1-2 on one (H, W, 3) uint8 image: the trace so far and one crop per plate found."""
@@ -185,8 +206,9 @@ class PlateReaderBase(Reader):
 class Lpdr(PlateReaderBase):
     """LPDR with vehicles from a segmentation network (``hints.segment``): the realistic attack.
 
-    Vehicles are found once per image and segmenter within a process (``_VEHICLES``); a batch with
-    any image not seen before is segmented whole. ``vehicle_cache_hits`` counts images served from it.
+    Vehicles are found once per image content and segmenter within a process (``vehicles_memo``); a
+    batch with any image not seen before is segmented whole, as a reader without the memory would.
+    ``vehicle_cache_hits`` counts images served from it.
     """
 
     name: ClassVar[str] = "lpdr"
@@ -202,7 +224,7 @@ class Lpdr(PlateReaderBase):
         if hints is None or hints.segment is None:
             raise ValueError("lpdr needs ReadHints(segment=...) (a network mapping images to Cityscapes train "
                              "ids); got no segment callable. Use lpdr-oracle to read with ground-truth vehicles.")
-        found = _segmented_vehicles(hints.segment)
+        found = vehicles_memo(hints.segment)
         keys = [content_key(im) for im in images]
         if found is None or any(k not in found for k in keys):
             # The whole batch, as a reader without the cache would: the same segmentation, bit for bit.
@@ -217,28 +239,6 @@ class Lpdr(PlateReaderBase):
         else:
             self.vehicle_cache_hits += len(keys)
         return [list(found[k]) for k in keys]
-
-
-_VEHICLES: weakref.WeakKeyDictionary[Any, dict[str, list[Box]]] = weakref.WeakKeyDictionary()
-"""Vehicles found by segmentation, per segmenter (held weakly: the entry lives as long as the run's
-segmenter does) and per image content, so every lpdr chain that reads the same image with the same
-segmenter segments it once."""
-
-
-def _segmented_vehicles(segment: Any) -> dict[str, list[Box]] | None:
-    """The vehicle cache of one segmenter, or None when it cannot be referenced weakly (no caching)."""
-    try:
-        return _VEHICLES.setdefault(segment, {})
-    except TypeError:
-        return None
-
-
-def content_key(image: Tensor) -> str:
-    """Identity of one image's content: BLAKE2b of its shape, dtype and bytes (32 hex digits)."""
-    array = image.detach().cpu().contiguous().numpy()
-    digest = hashlib.blake2b(f"{array.shape}{array.dtype}".encode(), digest_size=16)
-    digest.update(array.tobytes())
-    return digest.hexdigest()
 
 
 class LpdrOracle(PlateReaderBase):

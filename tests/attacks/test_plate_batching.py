@@ -12,6 +12,7 @@ import attacks
 import attacks.lpdr
 from attacks.plates import ocr as plate_ocr
 from attacks.plates.easyocr_models import load_easyocr
+from attacks.plates.memo import forgetting
 from benchmark.scenes import load_scenes
 from plate_reference import recognize_one_at_a_time  # tests/plate_reference.py
 
@@ -32,12 +33,13 @@ def test_batched_reads_equal_reading_each_crop_alone(monkeypatch, size, n):
     images, hints = _scenes(size, n)
     reader = attacks.load("lpdr-oracle")
     reader.fit(attacks.FitContext())
-    batched = reader.read(images, hints)
-    crops = sum(len(t.plates) for t in reader.last_trace)
-    with monkeypatch.context() as mp:
-        mp.setattr(attacks.lpdr, "read_plates", recognize_one_at_a_time)
-        alone = [reader.read(images[i:i + 1], attacks.ReadHints(vehicle_boxes=hints.vehicle_boxes[i:i + 1]))[0]
-                 for i in range(n)]
+    with forgetting():  # both ways recognise every crop (no read remembered from the other)
+        batched = reader.read(images, hints)
+        crops = sum(len(t.plates) for t in reader.last_trace)
+        with monkeypatch.context() as mp:
+            mp.setattr(attacks.lpdr, "read_plates", recognize_one_at_a_time)
+            alone = [reader.read(images[i:i + 1], attacks.ReadHints(vehicle_boxes=hints.vehicle_boxes[i:i + 1]))[0]
+                     for i in range(n)]
     assert _as_tuples(batched) == _as_tuples(alone)
     if size == (512, 1024):
         assert crops >= 5 and sum(map(len, batched)) >= 2  # the comparison covered real reads
