@@ -204,8 +204,8 @@ def pixel_integration_matrix(psf_size_px: int, pitch_mm: float, period_mm: float
 
 
 class PixelEnergy(torch.autograd.Function):
-    """Pupil phase (3, N, N) float64 -> pixel energies (3, K, K) float64 through `PupilModel`'s
-    padded FFT and pixel integration, with a hand-written backward.
+    """Mask coefficients (6,) float64 in um -> pixel energies (3, K, K) float64 through `PupilModel`'s
+    pupil phase, padded FFT and pixel integration, with a hand-written backward.
 
     Double precision throughout, though single would halve the cost and change the PSF by < 1e-6 in
     L1: at the co-design start (a flat mask) the PSF's first derivatives with respect to the even
@@ -218,23 +218,26 @@ class PixelEnergy(torch.autograd.Function):
     time in elementwise passes over (3, L, L) complex tensors; the backward here makes three (the
     product with the field, the inverse FFT, one pass on the pupil) and reuses the forward's field. A
     backward that must itself be differentiated (create_graph, the gradient penalty) recomputes the
-    field from the phase with differentiable ops, so second derivatives stay exact.
+    field from the coefficients with differentiable ops, so second derivatives stay exact.
     """
 
     @staticmethod
-    def forward(ctx, phase: torch.Tensor, model: "PupilModel") -> torch.Tensor:  # type: ignore[override]
-        u, field = model.padded_field(phase)
+    def forward(ctx, coefficients_um: torch.Tensor, model: "PupilModel") -> torch.Tensor:  # type: ignore[override]
+        u, field = model.padded_field(model.pupil_phase(coefficients_um))
         ctx.model = model
-        ctx.save_for_backward(phase, u, field)
+        ctx.save_for_backward(coefficients_um, u, field)
         return model.pixels_from_field(field)
 
     @staticmethod
     def backward(ctx, grad_pixels: torch.Tensor) -> tuple[torch.Tensor, None]:  # type: ignore[override]
-        phase, u, field = ctx.saved_tensors
+        coefficients_um, u, field = ctx.saved_tensors
         model = ctx.model
-        if torch.is_grad_enabled():  # create_graph: the gradient must depend on phase differentiably
-            u, field = model.padded_field(phase)
-        return model.phase_gradient(u, field, grad_pixels), None
+        if torch.is_grad_enabled():  # create_graph: the gradient must depend on the coefficients differentiably
+            u, field = model.padded_field(model.pupil_phase(coefficients_um))
+        grad_phase = model.phase_gradient(u, field, grad_pixels)
+        # phase = sum_j c_j (2 pi (n - 1) / lambda) Z_j + defocus: the chain rule through the basis.
+        grad_thickness = torch.tensordot(model.phase_per_um, grad_phase, dims=1)
+        return model.basis.flatten(1) @ grad_thickness.flatten(), None
 
 
 class PupilModel(torch.nn.Module):
@@ -307,7 +310,7 @@ class PupilModel(torch.nn.Module):
         (lambda z_s)^2 times the integral of |U|^2 over the pupil, so the ratio of the two is the
         energy fraction that landed inside the K x K crop.
         """
-        pixels = PixelEnergy.apply(self.pupil_phase(coefficients_um), self)
+        pixels = PixelEnergy.apply(coefficients_um.to(torch.float64), self)
         total = self.aperture.sum() * self.pupil_dx_mm**2 * (self.wavelength_mm * self.constants.sensor_distance_mm) ** 2
         return pixels, total
 
