@@ -269,8 +269,12 @@ class PupilModel(torch.nn.Module):
         integration = np.stack([pixel_integration_matrix(geometry.psf_size_px, self.pitch_mm, period, n - 1,
                                                          geometry.fft_size) for period in self.period_mm])
         # The field is the FFT times dx^2; folding that factor into G spares a pass over (3, L, L).
+        # Single precision for the two products with G (half the time of double): they are linear
+        # in |F|^2, which at a flat mask is even in the even terms sample by sample, so whatever
+        # rounding they add to the pixels or to d/d|F|^2 leaves those terms' gradient exactly zero
+        # (tests/lenses/test_pixel_energy_backward.py); the field and its adjoint FFT stay double.
         integration = integration * self.pupil_dx_mm**2
-        self.register_buffer("integration", torch.from_numpy(integration), persistent=False)
+        self.register_buffer("integration", torch.from_numpy(integration).to(torch.float32), persistent=False)
         self.register_buffer("wavelength_mm", torch.tensor(c.wavelength_mm, dtype=torch.float64), persistent=False)
         self._mft_kernels: dict[int, torch.Tensor] = {}
 
@@ -302,7 +306,8 @@ class PupilModel(torch.nn.Module):
 
     def pixel_energy(self, coefficients_um: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Energy per sensor pixel (3, K, K), the intensity integrated exactly over each pixel, and
-        the total energy (3,), both float64 in mm^2 x pupil intensity units.
+        the total energy (3,), both float64 in mm^2 x pupil intensity units (the pixels accurate to
+        single precision, ~1e-7 of the peak).
 
         The field at the L x L sensor positions j lambda z_s / (L dx) of one period is the
         zero-padded FFT of the pupil times dx^2 (times a phase from the grid origin, which |.|^2
@@ -327,12 +332,13 @@ class PupilModel(torch.nn.Module):
         return u, torch.fft.fft(torch.fft.fft(u, n=size, dim=-1).transpose(1, 2), n=size, dim=-1)
 
     def pixels_from_field(self, field_t: torch.Tensor) -> torch.Tensor:
-        """Pixel energies G |F|^2 G^T (3, K, K) float64 from the transposed padded FFT (3, L, L).
+        """Pixel energies G |F|^2 G^T (3, K, K), float64 holding float32-accurate values, from the
+        transposed padded FFT (3, L, L).
 
         The same G integrates both axes, so G |F^T|^2 G^T is the transpose of the pixel energies.
         """
-        intensity_t = field_t.real.square() + field_t.imag.square()  # |FFT|^2; the dx^4 lives in G
-        return (self.integration @ intensity_t @ self.integration.transpose(1, 2)).transpose(1, 2)
+        intensity_t = (field_t.real.square() + field_t.imag.square()).to(torch.float32)  # the dx^4 lives in G
+        return (self.integration @ intensity_t @ self.integration.transpose(1, 2)).transpose(1, 2).to(torch.float64)
 
     def phase_gradient(self, u: torch.Tensor, field_t: torch.Tensor, grad_pixels: torch.Tensor) -> torch.Tensor:
         """Vector-Jacobian product of pixel energies -> pupil phase: d loss / d phase (3, N, N) for
@@ -345,7 +351,8 @@ class PupilModel(torch.nn.Module):
         conjugate convention).
         """
         n = self.geometry.pupil_samples
-        grad_intensity_t = self.integration.transpose(1, 2) @ grad_pixels.transpose(1, 2) @ self.integration
+        grad_pixels_t = grad_pixels.transpose(1, 2).to(torch.float32)
+        grad_intensity_t = self.integration.transpose(1, 2) @ grad_pixels_t @ self.integration
         # Real times complex through the real view: no promotion of the real factor to complex.
         grad_field_t = torch.view_as_complex(torch.view_as_real(field_t) * grad_intensity_t.unsqueeze(-1))
         grad_rows = torch.fft.ifft(grad_field_t, dim=-1, norm="forward")[..., :n].transpose(1, 2)
