@@ -337,7 +337,7 @@ class PupilModel(torch.nn.Module):
 
         The same G integrates both axes, so G |F^T|^2 G^T is the transpose of the pixel energies.
         """
-        intensity_t = (field_t.real.square() + field_t.imag.square()).to(torch.float32)  # the dx^4 lives in G
+        intensity_t = torch.addcmul(field_t.real.square(), field_t.imag, field_t.imag).to(torch.float32)  # dx^4 is in G
         return (self.integration @ intensity_t @ self.integration.transpose(1, 2)).transpose(1, 2).to(torch.float64)
 
     def phase_gradient(self, u: torch.Tensor, field_t: torch.Tensor, grad_pixels: torch.Tensor) -> torch.Tensor:
@@ -353,8 +353,8 @@ class PupilModel(torch.nn.Module):
         n = self.geometry.pupil_samples
         grad_pixels_t = grad_pixels.transpose(1, 2).to(torch.float32)
         grad_intensity_t = self.integration.transpose(1, 2) @ grad_pixels_t @ self.integration
-        # Real times complex through the real view: no promotion of the real factor to complex.
-        grad_field_t = torch.view_as_complex(torch.view_as_real(field_t) * grad_intensity_t.unsqueeze(-1))
+        # Cast first: torch's real-times-complex kernel is several times slower than complex-times-complex.
+        grad_field_t = field_t * grad_intensity_t.to(field_t.dtype)
         grad_rows = torch.fft.ifft(grad_field_t, dim=-1, norm="forward")[..., :n].transpose(1, 2)
         grad_u = torch.fft.ifft(grad_rows, dim=-1, norm="forward")[..., :n]
         return 2 * (u.real * grad_u.imag - u.imag * grad_u.real)
