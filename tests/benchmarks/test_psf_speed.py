@@ -13,10 +13,10 @@ give at that grid. Every library runs at its default thread count; prysm's point
 The contenders take turns in blocks (fastest call of all blocks counts), each block after a pause
 and one untimed call: after a call, numpy's OpenBLAS keeps a worker thread spinning for about
 2^28 cycles (~0.1 s, its THREAD_TIMEOUT), which on 2 cores takes one from torch's OpenMP threads,
-so a torch call timed right after a prysm call ran 2-5x slower than after a pause (and a prysm call
-after a torch call was not slowed: OpenMP's workers sleep within a millisecond). Strict
-alternation therefore measured the interference, against the suite; blocks still share the
-machine's load between both.
+so a torch call timed right after a prysm call ran 1.3-8x slower than after a pause, while a prysm
+call after a torch call was not slowed (OpenMP's workers sleep within a millisecond; measured
+2026-11-24, load 8-17). Strict alternation therefore timed the interference, against the suite;
+blocks still share the machine's load between both.
 """
 
 from __future__ import annotations
