@@ -13,6 +13,9 @@ from scipy.fft import next_fast_len
 # Above this PSF size the FFT path is faster on the CPU at 512 x 1024 (measured by
 # tests/benchmarks/test_lens_speed.py::test_convolution_crossover).
 FFT_THRESHOLD_PX = 15
+# Spectrum bytes per chunk of the no-grad FFT convolution: each temporary stays well under glibc's
+# 32 MiB mmap ceiling, so it is reused from the heap instead of page-faulted in on every call.
+CHUNK_BYTES = 16 << 20
 
 
 def _pad(x: torch.Tensor, r: int) -> torch.Tensor:
@@ -54,11 +57,28 @@ def psf_otf(psf: torch.Tensor, shape: tuple[int, int]) -> torch.Tensor:
 
 def apply_otf(x: torch.Tensor, otf: torch.Tensor, psf_size_px: int) -> torch.Tensor:
     """Convolve x (B,C,H,W) with the PSF whose psf_otf on fft_shape(H, W, K) is `otf`, same-size
-    output with reflect padding (the circular wrap only touches the padding, cropped away)."""
+    output with reflect padding (the circular wrap only touches the padding, cropped away).
+
+    Without autograd, a few images at a time (at most CHUNK_BYTES of spectrum) into a preallocated
+    output, multiplying each spectrum in place: the temporaries of a whole batch of 8 at 512 x 1024
+    (each over glibc's 32 MiB mmap ceiling, so mapped afresh on every call) cost ~450 MB of page
+    faults per call, more than the transforms themselves; small images still go many per call.
+    """
     r = psf_size_px // 2
-    shape = fft_shape(x.shape[-2], x.shape[-1], psf_size_px)
-    y = torch.fft.irfft2(torch.fft.rfft2(_pad(x, r), s=shape) * otf, s=shape)
-    return y[..., r:r + x.shape[-2], r:r + x.shape[-1]]
+    h, w = x.shape[-2:]
+    shape = fft_shape(h, w, psf_size_px)
+    spectrum_dtype = torch.promote_types(otf.dtype, torch.complex64 if x.dtype != torch.float64 else torch.complex128)
+    if (torch.is_grad_enabled() and (x.requires_grad or otf.requires_grad)) or spectrum_dtype != otf.dtype:
+        y = torch.fft.irfft2(torch.fft.rfft2(_pad(x, r), s=shape) * otf, s=shape)
+        return y[..., r:r + h, r:r + w]
+    out = x.new_empty(x.shape, dtype=otf.real.dtype)
+    per_image = x.shape[1] * otf.shape[-2] * otf.shape[-1] * otf.element_size()
+    step = max(1, CHUNK_BYTES // per_image)
+    for i in range(0, x.shape[0], step):
+        spectrum = torch.fft.rfft2(_pad(x[i:i + step], r), s=shape)
+        spectrum *= otf
+        out[i:i + step] = torch.fft.irfft2(spectrum, s=shape)[..., r:r + h, r:r + w]
+    return out
 
 
 def convolve_fft(x: torch.Tensor, psf: torch.Tensor) -> torch.Tensor:

@@ -203,6 +203,43 @@ def pixel_integration_matrix(psf_size_px: int, pitch_mm: float, period_mm: float
     return (to_pixels @ from_samples).real * (pitch_mm / fft_size)
 
 
+class PixelEnergy(torch.autograd.Function):
+    """Mask coefficients (6,) float64 in um -> pixel energies (3, K, K) float64 through `PupilModel`'s
+    pupil phase, padded FFT and pixel integration, with a hand-written backward.
+
+    Double precision throughout, though single would halve the cost and change the PSF by < 1e-6 in
+    L1: at the co-design start (a flat mask) the PSF's first derivatives with respect to the even
+    terms (defocus, astigmatism) are exactly zero, and single-precision rounding noise there is as
+    large as Adam's epsilon, so it would push those coefficients by up to one learning rate per step
+    in a random direction (and data-parallel ranks would no longer reproduce the single-process run:
+    tests/benchmark/codesign/test_ddp.py).
+
+    Autograd through the composite (polar, padded FFT, real/imag, squares, matmuls) spent most of its
+    time in elementwise passes over (3, L, L) complex tensors; the backward here makes three (the
+    product with the field, the inverse FFT, one pass on the pupil) and reuses the forward's field. A
+    backward that must itself be differentiated (create_graph, the gradient penalty) recomputes the
+    field from the coefficients with differentiable ops, so second derivatives stay exact.
+    """
+
+    @staticmethod
+    def forward(ctx, coefficients_um: torch.Tensor, model: "PupilModel") -> torch.Tensor:  # type: ignore[override]
+        u, field = model.padded_field(model.pupil_phase(coefficients_um))
+        ctx.model = model
+        ctx.save_for_backward(coefficients_um, u, field)
+        return model.pixels_from_field(field)
+
+    @staticmethod
+    def backward(ctx, grad_pixels: torch.Tensor) -> tuple[torch.Tensor, None]:  # type: ignore[override]
+        coefficients_um, u, field = ctx.saved_tensors
+        model = ctx.model
+        if torch.is_grad_enabled():  # create_graph: the gradient must depend on the coefficients differentiably
+            u, field = model.padded_field(model.pupil_phase(coefficients_um))
+        grad_phase = model.phase_gradient(u, field, grad_pixels)
+        # phase = sum_j c_j (2 pi (n - 1) / lambda) Z_j + defocus: the chain rule through the basis.
+        grad_thickness = torch.tensordot(model.phase_per_um, grad_phase, dims=1)
+        return model.basis.flatten(1) @ grad_thickness.flatten(), None
+
+
 class PupilModel(torch.nn.Module):
     """Differentiable pupil -> sensor-pixel PSF for the three colour channels of one lens.
 
@@ -232,8 +269,12 @@ class PupilModel(torch.nn.Module):
         integration = np.stack([pixel_integration_matrix(geometry.psf_size_px, self.pitch_mm, period, n - 1,
                                                          geometry.fft_size) for period in self.period_mm])
         # The field is the FFT times dx^2; folding that factor into G spares a pass over (3, L, L).
+        # Single precision for the two products with G (half the time of double): they are linear
+        # in |F|^2, which at a flat mask is even in the even terms sample by sample, so whatever
+        # rounding they add to the pixels or to d/d|F|^2 leaves those terms' gradient exactly zero
+        # (tests/lenses/test_pixel_energy_backward.py); the field and its adjoint FFT stay double.
         integration = integration * self.pupil_dx_mm**2
-        self.register_buffer("integration", torch.from_numpy(integration), persistent=False)
+        self.register_buffer("integration", torch.from_numpy(integration).to(torch.float32), persistent=False)
         self.register_buffer("wavelength_mm", torch.tensor(c.wavelength_mm, dtype=torch.float64), persistent=False)
         self._mft_kernels: dict[int, torch.Tensor] = {}
 
@@ -265,7 +306,8 @@ class PupilModel(torch.nn.Module):
 
     def pixel_energy(self, coefficients_um: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Energy per sensor pixel (3, K, K), the intensity integrated exactly over each pixel, and
-        the total energy (3,), both float64 in mm^2 x pupil intensity units.
+        the total energy (3,), both float64 in mm^2 x pupil intensity units (the pixels accurate to
+        single precision, ~1e-7 of the peak).
 
         The field at the L x L sensor positions j lambda z_s / (L dx) of one period is the
         zero-padded FFT of the pupil times dx^2 (times a phase from the grid origin, which |.|^2
@@ -273,19 +315,49 @@ class PupilModel(torch.nn.Module):
         (lambda z_s)^2 times the integral of |U|^2 over the pupil, so the ratio of the two is the
         energy fraction that landed inside the K x K crop.
         """
-        size = self.geometry.fft_size
-        # Double precision throughout, though single would halve the cost and change the PSF by
-        # < 1e-6 in L1: at the co-design start (a flat mask) the PSF's first derivatives with
-        # respect to the even terms (defocus, astigmatism) are exactly zero, and single-precision
-        # rounding noise there is as large as Adam's epsilon, so it would push those coefficients by
-        # up to one learning rate per step in a random direction (and data-parallel ranks would no
-        # longer reproduce the single-process run: tests/lenses/test_ddp.py).
-        u = self.pupil_field(coefficients_um)
-        field = torch.fft.fft2(u, s=(size, size))
-        intensity = field.real**2 + field.imag**2  # |FFT|^2; the dx^4 lives in G
-        pixels = self.integration @ intensity @ self.integration.transpose(1, 2)
+        pixels = PixelEnergy.apply(coefficients_um.to(torch.float64), self)
         total = self.aperture.sum() * self.pupil_dx_mm**2 * (self.wavelength_mm * self.constants.sensor_distance_mm) ** 2
         return pixels, total
+
+    def padded_field(self, phase: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Pupil field U = A exp(i phase) (3, N, N) and the transpose of its zero-padded 2-D FFT,
+        (3, L, L) complex128 with rows along x frequency and columns along y frequency.
+
+        Both passes transform along the last (contiguous) axis: the N pupil rows (the other L - N
+        are zeros), then, transposed, all L columns. A padded fft2 (a strided pass over a
+        power-of-two row length, which thrashes the cache) costs about twice as much.
+        """
+        u = torch.complex(self.aperture * torch.cos(phase), self.aperture * torch.sin(phase))
+        size = self.geometry.fft_size
+        return u, torch.fft.fft(torch.fft.fft(u, n=size, dim=-1).transpose(1, 2), n=size, dim=-1)
+
+    def pixels_from_field(self, field_t: torch.Tensor) -> torch.Tensor:
+        """Pixel energies G |F|^2 G^T (3, K, K), float64 holding float32-accurate values, from the
+        transposed padded FFT (3, L, L).
+
+        The same G integrates both axes, so G |F^T|^2 G^T is the transpose of the pixel energies.
+        """
+        intensity_t = torch.addcmul(field_t.real.square(), field_t.imag, field_t.imag).to(torch.float32)  # dx^4 is in G
+        return (self.integration @ intensity_t @ self.integration.transpose(1, 2)).transpose(1, 2).to(torch.float64)
+
+    def phase_gradient(self, u: torch.Tensor, field_t: torch.Tensor, grad_pixels: torch.Tensor) -> torch.Tensor:
+        """Vector-Jacobian product of pixel energies -> pupil phase: d loss / d phase (3, N, N) for
+        d loss / d pixels (3, K, K), from `padded_field`'s outputs.
+
+        pixels = G |F|^2 G^T gives d/d|F|^2 = G^T grad G; |F|^2 gives 2 Re(conj(F) dF); the padded FFT's
+        adjoint is L^2 times the inverse FFT cropped to the pupil (norm="forward": unscaled inverse),
+        taken like the forward along the last axis (y frequency, cropped to the N pupil rows, then
+        transposed back, x); U = A exp(i phase) gives d/d phase = Im(conj(U) d/dU) (torch's
+        conjugate convention).
+        """
+        n = self.geometry.pupil_samples
+        grad_pixels_t = grad_pixels.transpose(1, 2).to(torch.float32)
+        grad_intensity_t = self.integration.transpose(1, 2) @ grad_pixels_t @ self.integration
+        # Cast first: torch's real-times-complex kernel is several times slower than complex-times-complex.
+        grad_field_t = field_t * grad_intensity_t.to(field_t.dtype)
+        grad_rows = torch.fft.ifft(grad_field_t, dim=-1, norm="forward")[..., :n].transpose(1, 2)
+        grad_u = torch.fft.ifft(grad_rows, dim=-1, norm="forward")[..., :n]
+        return 2 * (u.real * grad_u.imag - u.imag * grad_u.real)
 
     def forward(self, coefficients_um: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """PSF (3, K, K) float32, each channel summing to 1, and the energy fraction (3,) inside it."""

@@ -7,9 +7,16 @@ the same pupil grid and the same sensor samples, ratio <= 1 in one run.
 prysm has no pixel integration, so its pixel PSF is its intensity at the midpoints of s x s cells
 per pixel, summed (K*s samples per side at pitch / s): s = 3, the suite's earlier rule (4.7 % from the
 closed form, where the suite's exact integration is within 0.1 %), the cheapest pixel PSF prysm can
-give at that grid. Both are timed alternately in one loop (fastest of the rounds) with every
-library at its default thread count; prysm's point-sampled K x K PSF (no pixel integration at all)
-is timed too, for information only.
+give at that grid. Every library runs at its default thread count; prysm's point-sampled K x K PSF
+(no pixel integration at all) is timed too, for information only.
+
+The contenders take turns in blocks (fastest call of all blocks counts), each block after a pause
+and one untimed call: after a call, numpy's OpenBLAS keeps a worker thread spinning for about
+2^28 cycles (~0.1 s, its THREAD_TIMEOUT), which on 2 cores takes one from torch's OpenMP threads,
+so a torch call timed right after a prysm call ran 1.3-8x slower than after a pause, while a prysm
+call after a torch call was not slowed (OpenMP's workers sleep within a millisecond; measured
+2026-11-24, load 8-17). Strict alternation therefore timed the interference, against the suite;
+blocks still share the machine's load between both.
 """
 
 from __future__ import annotations
@@ -30,7 +37,9 @@ with warnings.catch_warnings():  # prysm 0.21 imports pkg_resources, which warns
     propagation = pytest.importorskip(
         "prysm.propagation", reason="prysm is not installed (pip install -e '.[test]'); it is the speed reference")
 
-ROUNDS = 15
+BLOCKS = 5
+CALLS_PER_BLOCK = 3
+SETTLE_S = 0.3  # > OpenBLAS's idle spin (2^28 cycles)
 SUBSAMPLES = 3
 
 
@@ -88,15 +97,17 @@ def test_psf_with_gradient_vs_prysm_forward(benchmark, name):
     def prysm() -> None:
         prysm_rgb_psf(lens, SUBSAMPLES)
 
-    ours()
-    prysm()
     ours_s, prysm_s, point_s = [], [], []
-    for _ in range(ROUNDS):
+    for _ in range(BLOCKS):
         for fn, times in ((ours, ours_s), (prysm, prysm_s), (lambda: prysm_rgb_psf(lens, 1), point_s)):
-            t0 = time.perf_counter()
+            time.sleep(SETTLE_S)
             fn()
-            times.append(time.perf_counter() - t0)
-    benchmark.pedantic(ours, rounds=ROUNDS, iterations=1, warmup_rounds=1)
+            for _ in range(CALLS_PER_BLOCK):
+                t0 = time.perf_counter()
+                fn()
+                times.append(time.perf_counter() - t0)
+    time.sleep(SETTLE_S)
+    benchmark.pedantic(ours, rounds=BLOCKS * CALLS_PER_BLOCK, iterations=1, warmup_rounds=1)
     ratio = min(ours_s) / min(prysm_s)
     benchmark.extra_info.update({
         "pupil_samples": lens.geometry.pupil_samples, "psf_size_px": lens.geometry.psf_size_px,
