@@ -151,3 +151,28 @@ def test_entry_accuracy_pools_seeds_with_a_wilson_interval():
     ci = binomtest(hits, n).proportion_ci(0.95, method="wilson")
     assert m.n_plates == n and m.accuracy == pytest.approx(hits / n)
     assert m.interval == pytest.approx((ci.low, ci.high), abs=1e-9)
+
+
+def test_specs_compare_as_the_lens_code_parses_them():
+    """A spec stored without the obsolete `simulation.oversample` (smoke entries) or with a default
+    spelled out is the same lens; one that no longer parses is no lens the study covers."""
+    assert "oversample" in DEFOCUS_SPEC["simulation"]
+    without = json.loads(json.dumps(DEFOCUS_SPEC))
+    del without["simulation"]["oversample"]
+    assert published.same_lens(DEFOCUS_SPEC, without) and published.same_lens(without, DEFOCUS_SPEC)
+    spelled_out = parse_spec(without, source="test").to_dict()
+    assert published.same_lens(DEFOCUS_SPEC, spelled_out)
+    broken = {**without, "optics": {**without["optics"], "focal_length": 25.0}}
+    assert not published.same_lens(DEFOCUS_SPEC, broken)
+
+
+def test_the_smoke_entries_carry_the_study_columns():
+    """The published smoke entries of ideal and defocus (stored without `simulation.oversample`) show
+    the study's ceiling, not "not computed"."""
+    entries = [e for e in load_entries(LEADERBOARD) if e.profile == "smoke" and e.lens in ("ideal", "defocus")]
+    assert {e.lens for e in entries} == {"ideal", "defocus"}
+    table = main_table(entries, STUDY)
+    for lens in ("ideal", "defocus"):
+        line = next(x for x in table.splitlines() if x.startswith(f"| {lens} | smoke"))
+        w5 = STUDY["lenses"][lens]["t1"]["w5_plate_px"]
+        assert "not computed" not in line and f"| {100 * STUDY['lenses'][lens]['t1']['plate_ceiling_w32']:.1f} | {w5} |" in line
