@@ -1,0 +1,60 @@
+"""The observer study merges into its stored record: only the lenses computed are replaced."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from benchmark.observer import study
+from benchmark.observer.ceiling import Precision, ceiling_curves
+
+TINY = Precision(min_plates=2, batch=2, max_plates=2)
+
+
+@pytest.fixture
+def stored(tmp_path, monkeypatch):
+    """A copy of the published study, and ceiling_curves made cheap (two plates, no letter pair)."""
+    path = tmp_path / "ideal_observer.json"
+    shutil.copy(study.REPO / "leaderboard" / "studies" / "ideal_observer.json", path)
+    monkeypatch.setattr(study, "ceiling_curves",
+                        lambda lens, widths, frames, **kw: ceiling_curves(lens, widths, frames, seed=kw["seed"],
+                                                                          precision=TINY, pair=None,
+                                                                          at_own_distance=kw["at_own_distance"]))
+    return path
+
+
+def test_computing_one_lens_keeps_every_other(stored):
+    before = json.loads(stored.read_text())
+    record = study.run_study(stored, None, names=("ideal",), widths_px=(4, 6), depth_lenses=(), precision=TINY,
+                             note="test grid")
+    after = json.loads(stored.read_text())
+    assert after == json.loads(json.dumps(record)) and set(after["lenses"]) == set(before["lenses"])
+    for name in set(before["lenses"]) - {"ideal"}:
+        assert after["lenses"][name] == before["lenses"][name]
+    ideal = after["lenses"]["ideal"]
+    assert ideal["t1"]["curve"]["widths_px"] == [4, 6] and ideal["note"] == "test grid"
+    assert ideal["seconds"] > 0 and len(ideal["load_average"]) == 2 and ideal["precision"]["max_plates"] == 2
+    assert "at_own_distance" not in ideal  # not asked for: the old depth curve went with the old record
+    assert after["not_computed"] == sorted(set(study.quick_lens_specs()) - set(after["lenses"]))
+
+
+def test_depth_only_adds_the_depth_curve_and_keeps_the_flat_one(stored):
+    before = json.loads(stored.read_text())
+    name = next(iter(before["lenses"]))
+    study.run_study(stored, None, names=(name,), widths_px=(4,), precision=TINY, depth_only=True)
+    after = json.loads(stored.read_text())["lenses"][name]
+    assert after["t1"] == before["lenses"][name]["t1"]
+    deep = after["at_own_distance"]
+    assert deep["t1"]["curve"]["widths_px"] == [4] and deep["t1"]["curve"]["object_distance_m"][0] > 10
+    missing = next(n for n in study.quick_lens_specs() if n not in before["lenses"]) if before.get("not_computed") \
+        else None
+    if missing is not None:
+        with pytest.raises(ValueError, match="depth_only needs the flat curve"):
+            study.run_study(stored, None, names=(missing,), depth_only=True)
+
+
+def test_an_unknown_lens_is_named():
+    with pytest.raises(ValueError, match="not on the quick leaderboard"):
+        study.run_study(names=("no-such-lens",))
