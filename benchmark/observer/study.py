@@ -130,6 +130,22 @@ def run_study(out_json: Path = REPO / "leaderboard" / "studies" / "ideal_observe
     return record
 
 
+def merge_study(out_json: Path, part_json: Path, names: tuple[str, ...]) -> dict:
+    """Copy the records of lenses `names` from `part_json` (a study computed apart, e.g. one lens per
+    process) into `out_json`, keeping every other lens of `out_json`; returns the merged record.
+    Both must share eps, seed and plate model (else a ValueError)."""
+    out, part = (json.loads(Path(p).read_text(encoding="utf-8")) for p in (out_json, part_json))
+    if any(out.get(k) != part.get(k) for k in ("eps", "seed", "plate_model")):
+        raise ValueError(f"{part_json} and {out_json} differ in eps, seed or plate model; they cannot be merged")
+    missing = [n for n in names if n not in part["lenses"]]
+    if missing:
+        raise ValueError(f"{part_json} has no record of {missing}; it has {sorted(part['lenses'])}")
+    out["lenses"].update({n: part["lenses"][n] for n in names})
+    out["not_computed"] = sorted(set(quick_lens_specs()) - set(out["lenses"]))
+    Path(out_json).write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
+    return out
+
+
 def write_chart(record: dict, path: Path) -> Path:
     """The study's chart (benchmark.charts.ideal_observer) with the published entries' readers on it."""
     from benchmark.charts.ideal_observer import write_ideal_observer_chart

@@ -58,3 +58,16 @@ def test_depth_only_adds_the_depth_curve_and_keeps_the_flat_one(stored):
 def test_an_unknown_lens_is_named():
     with pytest.raises(ValueError, match="not on the quick leaderboard"):
         study.run_study(names=("no-such-lens",))
+
+
+def test_a_part_computed_apart_merges_by_lens(stored, tmp_path):
+    part = tmp_path / "part.json"
+    shutil.copy(stored, part)
+    study.run_study(part, None, names=("ideal",), widths_px=(4,), depth_lenses=(), precision=TINY)
+    before = json.loads(stored.read_text())
+    merged = study.merge_study(stored, part, ("ideal",))
+    assert merged == json.loads(stored.read_text())
+    assert merged["lenses"]["ideal"] == json.loads(part.read_text())["lenses"]["ideal"]
+    assert all(merged["lenses"][n] == before["lenses"][n] for n in before["lenses"] if n != "ideal")
+    with pytest.raises(ValueError, match="has no record of"):
+        study.merge_study(stored, part, ("no-such-lens",))
