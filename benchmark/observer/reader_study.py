@@ -105,6 +105,31 @@ def run_reader_study(names: tuple[str, ...] = LENSES, readers: tuple[str, ...] =
     return record
 
 
+def combine(parts: list[Path], out_json: Path | None = OUT_JSON) -> dict:
+    """One record from reader studies run apart (e.g. one lens per process): their plates and timings
+    together, summarised and checked again against the study as it stands now; written to `out_json`."""
+    records: list[dict] = []
+    timing: dict = {}
+    specs: dict = {}
+    first = None
+    for path in parts:
+        part = json.loads(Path(path).read_text(encoding="utf-8"))
+        first = first or part
+        if any(part[k] != first[k] for k in ("profile", "scenes", "seed", "n_plates_target", "readers")):
+            raise ValueError(f"{path} was read with other settings than {parts[0]}; they cannot be combined")
+        records += part["plates"]
+        timing.update(part["timing"])
+        specs.update(part["lens_specs"])
+    if first is None:
+        raise ValueError("combine needs at least one reader-study file")
+    record = {**{k: first[k] for k in ("profile", "scenes", "seed", "n_plates_target", "readers")},
+              "lens_specs": specs, "timing": timing,
+              **summarise(records, specs, load_study(REPO / "leaderboard")), "plates": records}
+    if out_json is not None:
+        out_json.write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+    return record
+
+
 def main(argv: list[str] | None = None) -> dict:
     """`python -m benchmark.observer.reader_study [--lens NAME ...] [--plates N] [--seed S]`."""
     import argparse
@@ -113,9 +138,14 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--lens", action="append", help=f"quick-leaderboard lens (repeat; default {LENSES})")
     parser.add_argument("--plates", type=int, default=40, help="readable plates per lens (at least)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, default=OUT_JSON, help=f"record to write (default {OUT_JSON})")
+    parser.add_argument("--combine", type=Path, nargs="+", help="only combine these records into --out")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    return run_reader_study(tuple(args.lens) if args.lens else LENSES, n_plates=args.plates, seed=args.seed)
+    if args.combine:
+        return combine(args.combine, args.out)
+    return run_reader_study(tuple(args.lens) if args.lens else LENSES, n_plates=args.plates, seed=args.seed,
+                            out_json=args.out)
 
 
 if __name__ == "__main__":
