@@ -71,3 +71,28 @@ def test_a_part_computed_apart_merges_by_lens(stored, tmp_path):
     assert all(merged["lenses"][n] == before["lenses"][n] for n in before["lenses"] if n != "ideal")
     with pytest.raises(ValueError, match="has no record of"):
         study.merge_study(stored, part, ("no-such-lens",))
+
+
+def test_reader_studies_read_apart_combine_and_are_checked_again(tmp_path):
+    from benchmark.observer import reader_study
+    specs = study.quick_lens_specs()
+    paths = []
+    for lens, correct in (("defocus", False), ("ideal", True)):
+        plates = [{"lens": lens, "attack": "ideal-observer", "width_px": 40 + i, "correct": correct,
+                   "truth": "AB123CD", "read": "AB123CD" if correct else "AB123CO"} for i in range(5)]
+        part = {"profile": "quick", "scenes": "synthetic", "seed": 0, "n_plates_target": 5,
+                "readers": ["ideal-observer"], "lens_specs": {lens: specs[lens]},
+                "timing": {lens: {"ideal-observer": {"seconds": 1.0}}}, "plates": plates}
+        paths.append(tmp_path / f"{lens}.json")
+        paths[-1].write_text(json.dumps(part))
+    out = reader_study.combine(paths, tmp_path / "readers.json")
+    assert json.loads((tmp_path / "readers.json").read_text()) == json.loads(json.dumps(out))
+    assert len(out["plates"]) == 10 and set(out["timing"]) == {"defocus", "ideal"}
+    assert out["lenses"]["ideal"]["ideal-observer"]["bins"][0]["accuracy"] == 1.0
+    assert out["lenses"]["defocus"]["ideal-observer"]["bins"][0]["n_plates"] == 5
+    assert out["consistency"]["checked"] == ["defocus", "ideal"] and out["consistency"]["violations"] == []
+    other = json.loads(paths[0].read_text())
+    other["seed"] = 1
+    paths[0].write_text(json.dumps(other))
+    with pytest.raises(ValueError, match="other settings"):
+        reader_study.combine(paths, None)
