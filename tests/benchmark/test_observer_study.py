@@ -96,3 +96,18 @@ def test_reader_studies_read_apart_combine_and_are_checked_again(tmp_path):
     paths[0].write_text(json.dumps(other))
     with pytest.raises(ValueError, match="other settings"):
         reader_study.combine(paths, None)
+
+
+def test_the_published_study_covers_every_quick_lens_and_no_reader_beats_it():
+    """Every lens of the quick leaderboard has a ceiling computed for its very spec, W_5% separates
+    ideal, defocus and os-d-1000, and the stored reader study re-checks clean against it."""
+    from benchmark.observer import published, reader_study
+    record = published.load_study()
+    for name, spec in study.quick_lens_specs().items():
+        assert published.study_record(record, name, spec) is not None, name
+    assert record["not_computed"] == []
+    w5 = {n: record["lenses"][n]["t1"]["w5_plate_px"] for n in ("ideal", "defocus", "os-d-1000")}
+    assert len(set(w5.values())) == 3, w5
+    readers = json.loads(reader_study.OUT_JSON.read_text())
+    check = reader_study.summarise(readers["plates"], readers["lens_specs"], record)["consistency"]
+    assert check["violations"] == [] and sorted(check["checked"]) == sorted(readers["lens_specs"])
