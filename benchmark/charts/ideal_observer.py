@@ -5,11 +5,14 @@ study, T = 1 solid, T = 30 dashed, the PSF at each width's own distance dotted, 
 Bottom: one panel per lens, its T = 1 plate ceiling with the 95 % band and T = 30 dashed, and every
 reader and chain of the entries whose lens spec the study matches: the accuracy over all readable
 plates with its Wilson 95 % interval (entries keep no per-width accuracy), spread over the shaded
-widths it pools (readable plates, 32 px and up).
+widths it pools (readable plates, 32 px and up); and, as squares at each width bin's centre, the
+reader study (leaderboard/studies/ideal_observer_readers.json: `ideal-observer` beside `lpdr-oracle`
+on the same plates, per width bin with Wilson 95 % intervals) where its lens spec matches.
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -22,8 +25,25 @@ from benchmark.charts import new_figure, save_figure
 from benchmark.leaderboard_entries import Entry
 
 
-def ideal_observer_figure(study: dict, entries: Sequence[Entry] = ()) -> Figure:
-    """The chart of the module docstring; `study` is leaderboard/studies/ideal_observer.json."""
+READER_STUDY = Path("studies") / "ideal_observer_readers.json"
+
+
+def _bin_centre_px(low_px: float, high_px: float | None) -> float:
+    """Where a width bin's point is drawn: its geometric centre; an open last bin at 1.25 x its start."""
+    return float(np.sqrt(low_px * high_px)) if high_px is not None else 1.25 * low_px
+
+
+def _reader_study_points(readers: dict | None, name: str, spec: dict | None) -> list[tuple[str, dict]]:
+    """(reader, bin) of the reader study for lens `name` when its spec there matches the ceiling's."""
+    from benchmark.observer.published import same_lens
+    if readers is None or not same_lens(readers.get("lens_specs", {}).get(name), spec):
+        return []
+    return [(reader, b) for reader, record in readers["lenses"].get(name, {}).items() for b in record["bins"]]
+
+
+def ideal_observer_figure(study: dict, entries: Sequence[Entry] = (), readers: dict | None = None) -> Figure:
+    """The chart of the module docstring; `study` is leaderboard/studies/ideal_observer.json, `readers`
+    the reader study (ideal_observer_readers.json) or None."""
     from benchmark.observer.published import entry_accuracies, study_record
     names = list(study["lenses"])
     fig = new_figure(figsize=(max(12.0, 3.4 * len(names)), 11.0), layout="constrained")
@@ -72,6 +92,17 @@ def ideal_observer_figure(study: dict, entries: Sequence[Entry] = ()) -> Figure:
                                                          [100 * (m.interval[1] - m.accuracy)]],
                         fmt="o", ms=3, color=colours[k % len(colours)], capsize=2,
                         label=f"{m.reader} ({profile}, n={m.n_plates})")
+        study_points = _reader_study_points(readers, name, record.get("lens_spec"))
+        marks = {r: ("s", colours[(len(points) + k) % len(colours)])
+                 for k, r in enumerate(dict.fromkeys(r for r, _ in study_points))}
+        for reader, b in study_points:
+            x = _bin_centre_px(b["low_px"], b["high_px"]) * (0.97 if reader == "lpdr-oracle" else 1.03)
+            acc, (lo_acc, hi_acc) = 100 * b["accuracy"], (100 * v for v in b["interval"])
+            ax.errorbar([x], [acc], yerr=[[acc - lo_acc], [hi_acc - acc]], fmt=marks[reader][0], ms=3.5,
+                        color=marks[reader][1], capsize=2, mfc="none")
+        for reader, (marker, colour) in marks.items():
+            n = sum(b["n_plates"] for r, b in study_points if r == reader)
+            ax.plot([], [], marker, color=colour, mfc="none", label=f"{reader} per width bin (reader study, n={n})")
         ax.set_xscale("log")
         ax.set_xticks([4, 8, 16, 32, 64, 128])
         ax.set_xticklabels(["4", "8", "16", "32", "64", "128"])
@@ -79,7 +110,7 @@ def ideal_observer_figure(study: dict, entries: Sequence[Entry] = ()) -> Figure:
         ax.set_xlim(3.5, 190)
         ax.set_ylim(-2, 102)
         ax.set_xlabel("plate width (px)")
-        ax.set_title(name if points else f"{name} (no matching entry)", fontsize=9)
+        ax.set_title(name if points or study_points else f"{name} (no matching entry)", fontsize=9)
         ax.legend(fontsize=4.5, loc="upper center", bbox_to_anchor=(0.5, -0.22), ncol=2, frameon=False)
     panels[0].set_ylabel("plate read exactly (%)")
     bottom.suptitle("Ceiling (T=1, 95 % band) against the readers' accuracy over all readable plates "
@@ -87,6 +118,11 @@ def ideal_observer_figure(study: dict, entries: Sequence[Entry] = ()) -> Figure:
     return fig
 
 
-def write_ideal_observer_chart(study: dict, entries: Sequence[Entry], path: Path) -> Path:
-    """Save `ideal_observer_figure` to `path` (PNG); returns the path."""
-    return save_figure(ideal_observer_figure(study, entries), path, layout=False)
+def write_ideal_observer_chart(study: dict, entries: Sequence[Entry], path: Path, readers: dict | None = None
+                               ) -> Path:
+    """Save `ideal_observer_figure` to `path` (PNG, under a leaderboard's charts/); returns the path.
+    `readers` None: the reader study beside it (../studies/ideal_observer_readers.json) when there is one."""
+    if readers is None:
+        stored = Path(path).parent.parent / READER_STUDY
+        readers = json.loads(stored.read_text(encoding="utf-8")) if stored.is_file() else None
+    return save_figure(ideal_observer_figure(study, entries, readers), path, layout=False)

@@ -4,7 +4,8 @@ The study is keyed by lens name and records the lens spec each curve was compute
 applies to a leaderboard entry or a run's lens only when that spec matches the entry's (`same_lens`:
 every number, the mask's Zernike coefficients included, equal to 1e-9 relative; the free-text
 description ignored); otherwise the lens was changed (e.g. retrained) since the study and its
-ceiling is "not computed".
+ceiling is "not computed". Both specs are compared as today's lens code parses them, so a key
+the code has since dropped (`simulation.oversample`) or a default left out does not hide a match.
 
 Consistency. Every reader and chain of an entry is checked against its lens's T = 1 plate ceiling
 (`consistency.check_consistency`). Entries carry each chain's accuracy over all readable plates
@@ -29,6 +30,7 @@ from benchmark.observer.ceiling import CeilingCurve
 from benchmark.observer.consistency import BinAccuracy, Violation, check_consistency
 from benchmark.plate_scoring import READABLE_MIN_WIDTH_PX, WIDTH_BINS_PX
 from benchmark.stats import wilson_interval
+from lenses import LensSpecError, parse_spec
 
 log = logging.getLogger(__name__)
 
@@ -56,9 +58,24 @@ def _same(a: Any, b: Any) -> bool:
     return a == b
 
 
+def normalized_spec(spec: Mapping[str, Any], where: str = "") -> dict[str, Any] | None:
+    """`spec` as the lens code reads it today (`lenses.parse_spec(...).to_dict()`: obsolete keys such as
+    `simulation.oversample` dropped, defaults filled in), or None with a warning when it no longer parses."""
+    try:  # through JSON: a run's spec dict holds tuples where a stored one holds lists
+        return parse_spec(json.loads(json.dumps(dict(spec))), source=where).to_dict()
+    except LensSpecError as error:
+        log.warning("lens spec of %s does not parse (%s); no ideal-observer ceiling applies to it", where or "?", error)
+        return None
+
+
 def same_lens(study_spec: Mapping[str, Any] | None, spec: Mapping[str, Any] | None) -> bool:
-    """True when two lens specs (as stored in entries and the study) describe the same lens."""
-    return study_spec is not None and spec is not None and _same(dict(study_spec), dict(spec))
+    """True when two lens specs (as stored in entries and the study) describe the same lens: equal after
+    both are parsed by today's lens code (`normalized_spec`), so a spec stored with an obsolete key or
+    without a default matches; numbers to 1e-9 relative, the description ignored."""
+    if study_spec is None or spec is None:
+        return False
+    a, b = normalized_spec(study_spec, "the ideal-observer study"), normalized_spec(spec, "an entry or run")
+    return a is not None and b is not None and _same(a, b)
 
 
 def study_record(study: Mapping[str, Any] | None, lens: str, spec: Mapping[str, Any] | None) -> dict | None:

@@ -151,3 +151,64 @@ def test_entry_accuracy_pools_seeds_with_a_wilson_interval():
     ci = binomtest(hits, n).proportion_ci(0.95, method="wilson")
     assert m.n_plates == n and m.accuracy == pytest.approx(hits / n)
     assert m.interval == pytest.approx((ci.low, ci.high), abs=1e-9)
+
+
+def test_specs_compare_as_the_lens_code_parses_them():
+    """A spec stored without the obsolete `simulation.oversample` (smoke entries) or with a default
+    spelled out is the same lens; one that no longer parses is no lens the study covers."""
+    assert "oversample" in DEFOCUS_SPEC["simulation"]
+    without = json.loads(json.dumps(DEFOCUS_SPEC))
+    del without["simulation"]["oversample"]
+    assert published.same_lens(DEFOCUS_SPEC, without) and published.same_lens(without, DEFOCUS_SPEC)
+    spelled_out = parse_spec(without, source="test").to_dict()
+    assert published.same_lens(DEFOCUS_SPEC, spelled_out)
+    broken = {**without, "optics": {**without["optics"], "focal_length": 25.0}}
+    assert not published.same_lens(DEFOCUS_SPEC, broken)
+
+
+def test_the_smoke_entries_carry_the_study_columns():
+    """The published smoke entries of ideal and defocus (stored without `simulation.oversample`) show
+    the study's ceiling, not "not computed"."""
+    entries = [e for e in load_entries(LEADERBOARD) if e.profile == "smoke" and e.lens in ("ideal", "defocus")]
+    assert {e.lens for e in entries} == {"ideal", "defocus"}
+    table = main_table(entries, STUDY)
+    for lens in ("ideal", "defocus"):
+        line = next(x for x in table.splitlines() if x.startswith(f"| {lens} | smoke"))
+        w5 = STUDY["lenses"][lens]["t1"]["w5_plate_px"]
+        assert "not computed" not in line and f"| {100 * STUDY['lenses'][lens]['t1']['plate_ceiling_w32']:.1f} | {w5} |" in line
+
+
+def test_the_reader_study_checks_every_bin_against_the_ceiling(caplog, near_focus):
+    """A reader of the reader study that reads every 32-48 px plate of a lens whose ceiling there is
+    below 90 % trips the check (logged as an error, kept in the record); one that reads none passes."""
+    from benchmark.observer.reader_study import summarise
+    spec, study = near_focus
+    records = [{"lens": "near-focus", "attack": reader, "width_px": 33 + i % 10, "correct": reader == "answer-key",
+                "truth": "AB123CD", "read": "AB123CD" if reader == "answer-key" else ""}
+               for reader in ("answer-key", "lpdr-oracle") for i in range(40)]
+    with caplog.at_level(logging.ERROR):
+        out = summarise(records, {"near-focus": spec}, study)
+    assert [v["reader"] for v in out["consistency"]["violations"]] == ["answer-key"]
+    assert any("CEILING VIOLATION" in r.message and "answer-key" in r.message for r in caplog.records)
+    (cheat,) = out["lenses"]["near-focus"]["answer-key"]["bins"]
+    assert (cheat["low_px"], cheat["high_px"], cheat["n_plates"], cheat["accuracy"]) == (32, 48, 40, 1.0)
+    assert cheat["interval"][0] == pytest.approx(40 / (40 + 1.959963984540054**2))  # Wilson at 40 of 40
+
+
+def test_the_chart_draws_the_reader_study_per_width_bin(tmp_path):
+    from benchmark.charts.ideal_observer import ideal_observer_figure, write_ideal_observer_chart
+    bins = [{"low_px": 32, "high_px": 48, "accuracy": 0.25, "interval": [0.1, 0.5], "n_plates": 12},
+            {"low_px": 192, "high_px": None, "accuracy": 0.75, "interval": [0.4, 0.9], "n_plates": 4}]
+    readers = {"lens_specs": {"defocus": DEFOCUS_SPEC}, "lenses": {"defocus": {"ideal-observer": {"bins": bins}}}}
+    fig = ideal_observer_figure(STUDY, (), readers)
+    panel = next(ax for ax in fig.get_axes() if ax.get_title() == "defocus")
+    drawn = sorted((round(float(line.get_xdata()[0]), 3), float(line.get_ydata()[0])) for line in panel.get_lines()
+                   if line.get_marker() == "s" and len(line.get_xdata()))
+    assert drawn == [(round(1.03 * (32 * 48) ** 0.5, 3), 25.0), (round(1.03 * 1.25 * 192, 3), 75.0)]
+    other = {**readers, "lens_specs": {"defocus": {**DEFOCUS_SPEC, "optics": {**DEFOCUS_SPEC["optics"],
+                                                                              "focus_distance_m": 3.0}}}}
+    panel = next(ax for ax in ideal_observer_figure(STUDY, (), other).get_axes() if "defocus" in ax.get_title())
+    assert panel.get_title() == "defocus (no matching entry)"
+    (tmp_path / "studies").mkdir()
+    (tmp_path / "studies" / "ideal_observer_readers.json").write_text(json.dumps(readers))
+    assert write_ideal_observer_chart(STUDY, (), tmp_path / "charts" / "ideal_observer.png").is_file()
