@@ -30,3 +30,21 @@ def test_the_kept_scene_does_not_hold_the_restored_batch():
     assert kept.shape == (1, *sensor.shape[1:])
     assert kept.untyped_storage().nbytes() == kept.numel() * kept.element_size()
     assert [w.shape for w in out.restored_plates["raw"]] == [w.shape for w in windows]
+
+
+def test_restoration_metrics_score_in_chunks_with_the_one_batch_values(monkeypatch):
+    import benchmark.evaluation as evaluation
+    from benchmark.metrics import psnr, ssim
+
+    g = torch.Generator().manual_seed(0)
+    sharp = torch.rand(19, 3, 24, 40, generator=g)
+    restored = (sharp + 0.05 * torch.randn(19, 3, 24, 40, generator=g)).clamp(0, 1)
+    sizes = []
+    monkeypatch.setattr(evaluation, "ssim", lambda x, ref: sizes.append(x.shape[0]) or ssim(x, ref))
+    metrics, per_image = evaluation.restoration_metrics(restored, sharp)
+    assert max(sizes) <= evaluation.METRIC_CHUNK and sum(sizes) == 19
+    torch.testing.assert_close(torch.tensor(per_image["ssim"], dtype=torch.float64), ssim(restored, sharp),
+                               rtol=0, atol=1e-12)
+    torch.testing.assert_close(torch.tensor(per_image["psnr_db"], dtype=torch.float64), psnr(restored, sharp).double(),
+                               rtol=0, atol=1e-9)
+    assert metrics["n_images"] == 19.0
