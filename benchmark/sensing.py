@@ -86,7 +86,7 @@ def sense_windows(lens: lenses.Lens, frames: list[Scene], windows: list[PlateWin
     same noise at the same pixel. Equal means: the noise-free irradiance agrees to float rounding
     (the FFT of a different size), so after 10-bit quantization a rare pixel may differ by one level.
     """
-    halo = lens.psf().shape[-1] // 2 + 2
+    halo = lens.geometry.psf_size_px // 2 + 2
     out = []
     with torch.no_grad():
         for w in windows:

@@ -40,6 +40,7 @@ class Lens(torch.nn.Module):
         # OTFs of the current PSF per (transform size, dtype, device), each with the coefficients it
         # was made from: the forward of a lens that is not being differentiated reuses them.
         self._otf_cache: dict[tuple, tuple[tuple[float, ...], torch.Tensor]] = {}
+        self._psf_cache: tuple[tuple[float, ...], torch.Tensor] | None = None
 
     @property
     def name(self) -> str:
@@ -76,11 +77,18 @@ class Lens(torch.nn.Module):
         if entry is None or entry[0] != coefficients:
             # Outside inference mode, so that the cached tensor may later meet tensors that need grad.
             with torch.inference_mode(False), torch.no_grad():
-                otf = psf_otf(self.psf().to(device=device, dtype=dtype), shape)
+                otf = psf_otf(self._psf_without_grad(coefficients).to(device=device, dtype=dtype), shape)
             if len(self._otf_cache) >= 8:  # a few image sizes at most; drop the oldest
                 self._otf_cache.pop(next(iter(self._otf_cache)))
             entry = self._otf_cache[key] = (coefficients, otf)
         return entry[1]
+
+    def _psf_without_grad(self, coefficients: tuple[float, ...]) -> torch.Tensor:
+        """The PSF (3,K,K) for the OTF cache, computed once per set of coefficients: plate windows
+        come in many sizes, and each new transform size would otherwise recompute it (about 30 ms)."""
+        if self._psf_cache is None or self._psf_cache[0] != coefficients:
+            self._psf_cache = (coefficients, self.psf().detach())
+        return self._psf_cache[1]
 
     def forward(self, x: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
         if x.ndim != 4 or x.shape[1] != 3:

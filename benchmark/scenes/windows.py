@@ -96,7 +96,9 @@ def window_scene(frame: Scene, window: PlateWindow) -> Scene:
     if frame.plate_mask is not None:
         # Only the scored plate is ground truth in the window: id 1.
         mask = (frame.plate_mask[y0:y1, x0:x1] == window.plate + 1).astype(frame.plate_mask.dtype)
-    return Scene(frame.image[y0:y1, x0:x1], frame.labels[y0:y1, x0:x1],
+    # Copies, not views: a view would keep the whole frame alive for every window cut from it
+    # (about 1 GB for the 141 frames of a quick plate set).
+    return Scene(frame.image[y0:y1, x0:x1].copy(), frame.labels[y0:y1, x0:x1].copy(),
                  [replace(plate, box_xyxy=plate_box, vehicle_index=0)], [Vehicle(vehicle.train_id, vehicle_box)],
                  frame.seed,
                  f"{frame.name}@x{x0}y{y0}p{window.plate}", mask)

@@ -31,6 +31,24 @@ def test_cached_irradiance_equals_uncached_and_is_reused():
     assert len(lens._otf_cache) == 2
 
 
+def test_new_image_sizes_reuse_one_psf_until_the_coefficients_change(monkeypatch):
+    lens = trainable_lens()
+    calls = []
+    pupil = lens.pupil.forward
+    monkeypatch.setattr(lens.pupil, "forward", lambda c: calls.append(1) or pupil(c))
+    with torch.no_grad():
+        for size in (30, 34, 38, 42):  # plate windows: many sizes, one PSF
+            lens.irradiance(torch.rand(1, 3, size, size + 4))
+        assert len(calls) == 1
+        lens.coefficients_um.add_(0.05)
+        after = lens.irradiance(torch.rand(1, 3, 30, 34))
+    assert len(calls) == 2
+    x = torch.rand(1, 3, 46, 50)
+    with torch.no_grad():
+        torch.testing.assert_close(lens.irradiance(x), uncached_irradiance(lens, x), atol=1e-6, rtol=0)
+    assert after.shape == (1, 3, 30, 34)
+
+
 def test_training_step_sees_the_new_otf_and_gradients_match_the_uncached_path():
     lens = trainable_lens()
     x = torch.rand(2, 3, 40, 56, generator=torch.Generator().manual_seed(1))
