@@ -22,7 +22,7 @@ import attacks
 from benchmark.budget import time_budget
 from benchmark.intervals import plate_intervals, scene_intervals
 from benchmark.metrics import psnr, ssim
-from benchmark.plate_scoring import PlateOutcome, score_scene, summarise
+from benchmark.plate_scoring import PlateOutcome, readable, score_scene, summarise
 from benchmark.rows import RowBuilder, plate_units, scene_units
 from benchmark.run_config import RunConfig
 from benchmark.scenes import Scene
@@ -203,12 +203,26 @@ class Attacked:
     reads: dict[str, list[list[attacks.PlateRead]]] = field(default_factory=dict)
     described: dict[str, dict] = field(default_factory=dict)  # restorer name -> describe()
     references: set[str] = field(default_factory=set)          # restorers marked `reference`
-    restored_plates: dict[str, list[torch.Tensor]] = field(default_factory=dict)  # restorer -> plate windows
+    # restorer -> {window index: restored window}, only the windows the plate gallery shows
+    # (gallery_windows): the others are read as soon as they are restored, then dropped.
+    restored_plates: dict[str, dict[int, torch.Tensor]] = field(default_factory=dict)
+    # Reader rows and plate records, per reader in chain order (sensor first, then each restorer),
+    # kept apart while restorers and readers interleave; `finish` appends them to rows / plates.
+    reader_rows: dict[str, list[Row]] = field(default_factory=dict)
+    reader_plates: dict[str, list[dict]] = field(default_factory=dict)
+
+    def finish(self) -> None:
+        """Move the reader rows and plate records after the restorer rows, reader by reader."""
+        for name in list(self.reader_rows):
+            self.rows.extend(self.reader_rows.pop(name))
+            self.plates.extend(self.reader_plates.pop(name, []))
 
 
 def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dict[str, dict], cfg: RunConfig,
-                  rows: RowBuilder, out: Attacked) -> None:
-    """Restore with each restorer (fitted by its own task: `fitted[name]` = that task's meta) and score it."""
+                  rows: RowBuilder, out: Attacked, readers: Sequence[ReadyReader] = ()) -> None:
+    """Restore with each restorer (fitted by its own task: `fitted[name]` = that task's meta), score
+    it, and read its output with each of `readers` (the chains) before the next restorer, so that
+    only one restorer's plate windows are in memory at a time."""
     for attacker in tqdm(restorers, desc=f"{target.lens_name} restorers", leave=False):
         # A reference (e.g. the uncorrected image) is reported, but never as an attack.
         kind = "reference" if getattr(attacker, "reference", False) else "restorer"
@@ -238,16 +252,19 @@ def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dic
             if isinstance(windows, RowError):
                 out.rows.append(rows.failed(kind, attacker.name, windows, restorer=attacker.name, settings=settings))
                 continue
-            out.restored_plates[attacker.name] = windows
-        # Readers use the windows then; of the scenes only the sample picture's first one is kept
-        # (every restorer's 64 full scenes would hold gigabytes).
-        # A clone: a slice would keep the whole batch's storage alive (about 400 MB per restorer on quick).
+        # Of the scenes only the sample picture's first one is kept (every restorer's 64 full scenes
+        # would hold gigabytes); a clone, as a slice would keep the whole batch's storage alive.
         out.restored[attacker.name] = restored if target.plates is None else restored[:1].clone()
         out.described[attacker.name] = attacker.describe()
         if kind == "reference":
             out.references.add(attacker.name)
         metrics, per_image = restoration_metrics(restored, target.sharp)
+        for reader in readers:
+            read_chain(target, reader, attacker.name, restored if target.plates is None else windows, cfg, rows, out)
         del restored
+        if target.plates is not None:
+            out.restored_plates[attacker.name] = {i: windows[i] for i in gallery_windows(target.plates)}
+            del windows
         metrics.update({"fit_s": float(fit_s), "images_per_s": target.sharp.shape[0] / run_s})
         row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
                        threat_model=attacker.threat_model.value, settings={"restorer": attacker.describe()})
@@ -265,44 +282,89 @@ def resident_gb() -> float:
         return 0.0
 
 
+@dataclass
+class ReadyReader:
+    """A reader after its fit: `fit_error` is the fit's RowError (every chain of it is then a
+    failed row), None when it fitted."""
+
+    reader: attacks.Reader
+    fit_error: RowError | None
+
+
+def fit_readers(target: Target, readers: Sequence[attacks.Reader], cfg: RunConfig) -> list[ReadyReader]:
+    """Fit each reader that does not skip this target (a skip is logged)."""
+    ready = []
+    for reader in readers:
+        reason = reader.skip_reason(target.ctx)
+        if reason:
+            log.info("%s on %s skipped: %s", reader.name, target.lens_name, reason)
+            continue
+        error = attempt(reader.name, "fit", lambda: reader.fit(target.ctx), cfg.budget_s)
+        ready.append(ReadyReader(reader, error if isinstance(error, RowError) else None))
+    return ready
+
+
+def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
+               images: torch.Tensor | Sequence[torch.Tensor], cfg: RunConfig, rows: RowBuilder, out: Attacked) -> None:
+    """Read `images` (the sensor's when `restorer` is None, else that restorer's output; plate
+    windows when the target has them) with one fitted reader and score the chain."""
+    reader = ready.reader
+    chain = reader.name if restorer is None else chain_name(restorer, reader.name)
+    kind = "reader" if restorer is None else "reference" if restorer in out.references else "chain"
+    settings = {"reader": reader.describe(), **({"restorer": out.described[restorer]} if restorer else {})}
+    chain_rows = out.reader_rows.setdefault(reader.name, [])
+    if ready.fit_error is not None:
+        chain_rows.append(rows.failed(kind, chain, ready.fit_error, restorer=restorer, reader=reader.name,
+                                      settings=settings))
+        return
+    # The attacker with device access segments sensor images with the lens's own network,
+    # restored images with the clean one.
+    segment = target.segment_sensor if restorer is None else target.segment_restored
+    plate_scenes = target.scenes if target.plates is None else target.plates.scenes
+    result = attempt(reader.name, "read", lambda: read_plates(reader, images, plate_scenes, cfg.profile.batch_size,
+                                                               cfg.device, segment), cfg.budget_s)
+    if isinstance(result, RowError):
+        chain_rows.append(rows.failed(kind, chain, result, restorer=restorer, reader=reader.name, settings=settings))
+        return
+    outcomes, timing, out.reads[chain] = result
+    if target.plates is not None:
+        timing["n_frames"] = float(target.plates.n_frames)
+    row = rows.row(kind, {**summarise(outcomes), **timing}, attack=chain, restorer=restorer, reader=reader.name,
+                   threat_model=reader.threat_model.value, settings=settings)
+    plate_intervals(row, outcomes)
+    row.set_units(plate_units(outcomes))
+    chain_rows.append(row)
+    out.reader_plates.setdefault(reader.name, []).extend(
+        {"lens": target.lens_name, "attack": chain, "seed": row.seed, **o.__dict__} for o in outcomes)
+
+
+def read_sensor(target: Target, readers: Sequence[ReadyReader], cfg: RunConfig, rows: RowBuilder, out: Attacked
+                ) -> None:
+    """Each reader on the sensor images (the plate windows when the target has them)."""
+    for ready in readers:
+        read_chain(target, ready, None, target.sensor if target.plates is None else target.plates.sensor,
+                   cfg, rows, out)
+
+
 def run_reader(target: Target, reader: attacks.Reader, cfg: RunConfig, rows: RowBuilder, out: Attacked) -> None:
-    """Read with `reader` on the sensor images and on every restored set; score each chain."""
-    plate_scenes, sensor, restored = plate_images(target, out)
-    sources = {reader.name: (None, sensor),
-               **{chain_name(name, reader.name): (name, images) for name, images in restored.items()}}
-    fit_error = attempt(reader.name, "fit", lambda: reader.fit(target.ctx), cfg.budget_s)
-    for chain, (restorer, images) in tqdm(sources.items(), desc=f"{target.lens_name} {reader.name}", leave=False):
-        kind = "reader" if restorer is None else "reference" if restorer in out.references else "chain"
-        settings = {"reader": reader.describe(), **({"restorer": out.described[restorer]} if restorer else {})}
-        if isinstance(fit_error, RowError):
-            out.rows.append(rows.failed(kind, chain, fit_error, restorer=restorer, reader=reader.name,
-                                        settings=settings))
-            continue
-        # The attacker with device access segments sensor images with the lens's own network,
-        # restored images with the clean one.
-        segment = target.segment_sensor if restorer is None else target.segment_restored
-        result = attempt(reader.name, "read", lambda: read_plates(reader, images, plate_scenes,
-                                                                   cfg.profile.batch_size, cfg.device, segment),
-                         cfg.budget_s)
-        if isinstance(result, RowError):
-            out.rows.append(rows.failed(kind, chain, result, restorer=restorer, reader=reader.name, settings=settings))
-            continue
-        outcomes, timing, out.reads[chain] = result
-        if target.plates is not None:
-            timing["n_frames"] = float(target.plates.n_frames)
-        row = rows.row(kind, {**summarise(outcomes), **timing}, attack=chain, restorer=restorer, reader=reader.name,
-                       threat_model=reader.threat_model.value, settings=settings)
-        plate_intervals(row, outcomes)
-        row.set_units(plate_units(outcomes))
-        out.rows.append(row)
-        out.plates.extend({"lens": target.lens_name, "attack": chain, "seed": row.seed, **o.__dict__}
-                          for o in outcomes)
+    """Fit `reader`, read the sensor images and every restored set already in `out`, score each
+    chain; its rows go to `out.rows` (for a target without restorers, e.g. the sharp scenes)."""
+    for ready in fit_readers(target, [reader], cfg):
+        read_sensor(target, [ready], cfg, rows, out)
+        for name, images in (out.restored if target.plates is None else {}).items():
+            read_chain(target, ready, name, images, cfg, rows, out)
+    out.finish()
 
 
-def plate_images(target: Target, out: Attacked
-                 ) -> tuple[list[Scene], torch.Tensor | list[torch.Tensor], dict[str, torch.Tensor] | dict[str, list[torch.Tensor]]]:
-    """Where plates are read: (scene records, sensor images, restorer -> restored images), from the
-    plate windows when the target has them, else from the scenes themselves."""
-    if target.plates is None:
-        return target.scenes, target.sensor, out.restored
-    return target.plates.scenes, target.plates.sensor, out.restored_plates
+def gallery_windows(plates: PlateSet, max_plates: int = 8) -> list[int]:
+    """Indices of the plate windows the run's plate gallery shows: the most common window size
+    (its images must stack), at most `max_plates` of them, widest readable plates first (the
+    gallery's own order, benchmark.charts.plate_gallery)."""
+    shapes = [tuple(t.shape) for t in plates.sharp]
+    if not shapes:
+        return []
+    common = max(set(shapes), key=shapes.count)
+    pick = [i for i, shape in enumerate(shapes) if shape == common]
+    widths = {i: max((p.box_xyxy[2] - p.box_xyxy[0] for p in plates.scenes[i].plates if readable(p)), default=-1)
+              for i in pick}
+    return sorted(sorted(pick, key=lambda i: -widths[i])[:max_plates])

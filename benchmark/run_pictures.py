@@ -12,7 +12,7 @@ import torch
 
 import lenses
 from benchmark.charts.plate_gallery import write_plate_gallery
-from benchmark.evaluation import Attacked, Target
+from benchmark.evaluation import Attacked, Target, gallery_windows
 from benchmark.plate_scoring import readable
 from benchmark.cache import config_hash
 from benchmark.charts.samples import write_sample_grid
@@ -41,7 +41,8 @@ def sample_grid(target: Target, lens: lenses.Lens, out: Attacked, folder: Path) 
 def plate_gallery(target: Target, out: Attacked, reader: str, folder: Path) -> str | None:
     """The reader's plate gallery over sensor and restored images; its file name (None: nothing to show).
 
-    With plate windows, the gallery shows the most common window size (its images must stack)."""
+    With plate windows, the gallery shows the windows of `gallery_windows` (the most common size,
+    so that its images stack)."""
     if reader not in out.reads:
         return None
     chains = {name: chain_name(name, reader) for name in out.restored if chain_name(name, reader) in out.reads}
@@ -50,8 +51,7 @@ def plate_gallery(target: Target, out: Attacked, reader: str, folder: Path) -> s
         images = {"sharp": target.sharp, "sensor": target.sensor, **{n: out.restored[n] for n in chains}}
     else:
         p = target.plates
-        shapes = [tuple(t.shape) for t in p.sharp]
-        pick = [i for i, s in enumerate(shapes) if s == max(set(shapes), key=shapes.count)] if shapes else []
+        pick = gallery_windows(p)  # the only windows the evaluation keeps of each restorer
         scenes = [p.scenes[i] for i in pick]
         images = {name: torch.stack([windows[i] for i in pick]) if pick else torch.empty(0)
                   for name, windows in {"sharp": p.sharp, "sensor": p.sensor,

@@ -29,7 +29,8 @@ from benchmark import profiling, task_costs
 from benchmark.attacker_objects import load as load_attacker
 from benchmark.budget import BudgetExceeded, time_budget
 from benchmark.cache import CHECKSUM_SUFFIX, ArtifactCache, discard, exclusive, read_verified, write_verified
-from benchmark.evaluation import Attacked, PlateSet, Target, attempt, run_reader, run_restorers
+from benchmark.evaluation import (Attacked, PlateSet, Target, attempt, fit_readers, read_sensor, run_reader,
+                                  run_restorers)
 from benchmark.intervals import utility_intervals
 from benchmark.planning import AttackerRef, Task, fit_task
 from benchmark.plate_scoring import readable
@@ -353,15 +354,14 @@ def _evaluate(task: Task, cfg: RunConfig, staging: Path) -> TaskResult:
     readers, failed_readers = _load_attackers(task.readers, attacks.Reader, builder)
     fitted = {ref.name: _fit_meta(staging.parent, task, ref) for ref in task.restorers}
     out = Attacked(rows=failed_restorers + failed_readers)
-    run_restorers(target, restorers, fitted, cfg, builder, out)
+    ready = fit_readers(target, readers, cfg)
+    read_sensor(target, ready, cfg, builder, out)
+    # Each restorer's output is read by every reader right away (run_restorers), then dropped.
+    run_restorers(target, restorers, fitted, cfg, builder, out, ready)
+    out.finish()
     pictures = [sample_grid(target, lens, out, staging)]
-    for reader in readers:
-        reason = reader.skip_reason(target.ctx)
-        if reason:
-            log.info("%s on %s skipped: %s", reader.name, task.lens, reason)
-            continue
-        run_reader(target, reader, cfg, builder, out)
-        gallery = plate_gallery(target, out, reader.name, staging)
+    for r in ready:
+        gallery = plate_gallery(target, out, r.reader.name, staging)
         pictures += [gallery] if gallery else []
     return TaskResult(out.rows, builder.settings, out.plates, meta={"pictures": pictures})
 
