@@ -222,8 +222,11 @@ def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dic
                   rows: RowBuilder, out: Attacked, readers: Sequence[ReadyReader] = ()) -> None:
     """Restore with each restorer (fitted by its own task: `fitted[name]` = that task's meta), score
     it, and read its output with each of `readers` (the chains) before the next restorer, so that
-    only one restorer's plate windows are in memory at a time."""
-    for attacker in tqdm(restorers, desc=f"{target.lens_name} restorers", leave=False):
+    only one restorer's plate windows are in memory at a time.
+
+    `restorers` is consumed: each restorer is dropped from it once scored, so that its network and
+    inference session (about 1 GB for a quick NAFNet in ONNX Runtime) go before the next one loads."""
+    for attacker in tqdm(_drain(restorers), total=len(restorers), desc=f"{target.lens_name} restorers", leave=False):
         # A reference (e.g. the uncorrected image) is reported, but never as an attack.
         kind = "reference" if getattr(attacker, "reference", False) else "restorer"
         settings = {"restorer": attacker.describe()}
@@ -272,6 +275,12 @@ def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dic
         row.set_units(scene_units(target.scenes, per_image))
         out.rows.append(row)
         log.debug("%s on %s: resident memory %.2f GB", attacker.name, target.lens_name, resident_gb())
+
+
+def _drain(items: list[T]) -> Iterator[T]:
+    """The items of `items`, each removed from the list as it is handed out."""
+    while items:
+        yield items.pop(0)
 
 
 def resident_gb() -> float:

@@ -5,6 +5,8 @@ of every restorer alive (about 400 MB each on quick): a fresh quick run was kill
 
 from __future__ import annotations
 
+import weakref
+
 import torch
 
 import attacks
@@ -24,8 +26,11 @@ def test_the_kept_scene_does_not_hold_the_restored_batch():
     plates = PlateSet(scenes=scenes[:2], sharp=windows, sensor=windows, n_frames=2)
     target = Target("fake", scenes, sensor, sensor, attacks.FitContext(), None, None, plates=plates)
     out = Attacked()
-    run_restorers(target, [attacks.load("raw")], {}, cfg,
-                  RowBuilder(cfg, "fake", 0, {"lens": "fake"}, {"device": "cpu"}), out)
+    restorers = [attacks.load("raw")]
+    gone = weakref.ref(restorers[0])
+    run_restorers(target, restorers, {}, cfg, RowBuilder(cfg, "fake", 0, {"lens": "fake"}, {"device": "cpu"}), out)
+    # Consumed: nothing of the evaluation holds a scored restorer (or its inference session) any more.
+    assert restorers == [] and gone() is None
     kept = out.restored["raw"]
     assert kept.shape == (1, *sensor.shape[1:])
     assert kept.untyped_storage().nbytes() == kept.numel() * kept.element_size()
