@@ -57,8 +57,18 @@ def _worst(name: str, kind: str, digits: int, pct: bool = False, named: bool = T
         if found is None:
             return "", None
         stat, attack = found
-        return (f"{pm(stat, digits, pct)} ({attack})" if named else pm(stat, digits, pct)), stat.mean
+        return (f"{pm(stat, digits, pct)} ({attack}{_fewer_seeds(e, attack)})" if named
+                else pm(stat, digits, pct)), stat.mean
     return cell
+
+
+def _fewer_seeds(e: Entry, attack: str) -> str:
+    """", seed 0" when the chain ran on fewer seeds than its entry (e.g. a trained attacker fitted
+    at seed 0 only), else ""."""
+    chain = e.chain(attack)
+    if chain is None or set(chain.seeds) >= set(e.seeds):
+        return ""
+    return f", seed{'s' if len(chain.seeds) > 1 else ''} {','.join(str(s) for s in chain.seeds)} only"
 
 
 def _single(attack: str, name: str, fmt: str) -> Callable[[Entry, set[str] | None], Cell]:
