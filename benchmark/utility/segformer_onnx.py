@@ -99,6 +99,9 @@ class FoldedSegformerLogits(nn.Module):
         self.classifier = head.classifier
         self.register_buffer("mean", torch.tensor(IMAGENET_MEAN).view(1, 3, 1, 1))
         self.register_buffer("std", torch.tensor(IMAGENET_STD).view(1, 3, 1, 1))
+        self.shift: Tensor
+        self.mean: Tensor
+        self.std: Tensor
 
     def forward(self, images: Tensor) -> Tensor:
         """Images (B, 3, H, W) in [0, 1] -> logits (B, num_labels, H, W), as ``segment_logits``."""
