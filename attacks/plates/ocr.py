@@ -7,9 +7,11 @@ alphabet to plate characters. Text is normalised to upper-case letters and digit
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import sys
+from collections.abc import Iterator
 from typing import Any
 
 import cv2
@@ -17,7 +19,7 @@ import numpy as np
 import torch
 
 __all__ = ["PLATE_ALPHABET", "OcrResult", "apply_format", "normalise", "padded_width", "prepare_crop", "read_plate",
-           "read_plates", "recognize_rows", "SharedFeatures", "text_box"]
+           "read_plates", "recognize_rows", "one_thread", "SharedFeatures", "text_box"]
 
 PLATE_ALPHABET = "ABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789"
 """Characters the recognizer may output (EasyOCR ``allowlist``)."""
@@ -152,10 +154,29 @@ class SharedFeatures(torch.nn.Module):
         m: Any = self.model
         features = m.FeatureExtraction(image)
         out = []
-        for one in features.split(1):
-            sequence = m.AdaptiveAvgPool(one.permute(0, 3, 1, 2)).squeeze(3)
-            out.append(m.Prediction(m.SequenceModeling(sequence).contiguous()))
+        with one_thread():
+            for one in features.split(1):
+                sequence = m.AdaptiveAvgPool(one.permute(0, 3, 1, 2)).squeeze(3)
+                out.append(m.Prediction(m.SequenceModeling(sequence).contiguous()))
         return torch.cat(out)
+
+
+@contextlib.contextmanager
+def one_thread() -> Iterator[None]:
+    """Torch on one intra-op thread within the block (the caller's count is back after it).
+
+    The quantized BiLSTM of one crop is a chain of (1 x 256) x (256 x 1024) products, one per time
+    step: splitting each over threads costs more than it saves (on 2 cores, 1 thread read a crop's
+    tail in 8 ms, 2 threads in 177 ms with the machine loaded 6-fold; tests/benchmarks/
+    test_lpdr_chain_speed.py). Integer accumulation makes the output the same at any thread count
+    (tests/attacks/test_lpdr_fast_paths.py).
+    """
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 def padded_width(row: np.ndarray, height_px: int = OCR_HEIGHT_PX) -> int:
