@@ -18,11 +18,12 @@ from __future__ import annotations
 from collections.abc import Callable, Hashable, Iterator
 from typing import Any, TypeVar
 
+import numpy as np
 import scipy.fft
 import torch
 from torch import Tensor
 
-__all__ = ["CHUNK_BYTES", "OtfCache", "image_chunks", "irfft2", "rfft2", "rfft_otf"]
+__all__ = ["CHUNK_BYTES", "OtfCache", "circular_filter", "image_chunks", "irfft2", "rfft2", "rfft_otf"]
 
 T = TypeVar("T")
 
@@ -46,6 +47,20 @@ def irfft2(spectrum: Tensor, shape: tuple[int, int]) -> Tensor:
     if not _scipy_ok(spectrum) or spectrum.dtype not in (torch.complex64, torch.complex128):
         return torch.fft.irfft2(spectrum, s=shape)
     return torch.from_numpy(scipy.fft.irfft2(spectrum.detach().resolve_conj().numpy(), s=shape, workers=torch.get_num_threads()))
+
+
+def circular_filter(x: Tensor, transfer: Tensor) -> Tensor:
+    """``irfft2(rfft2(x) * transfer)`` at x's size: x (..., H, W) real, circularly convolved with the
+    filter whose ``rfft2``-layout transfer function is ``transfer`` (broadcastable to
+    (..., H, W // 2 + 1), complex). On the scipy path the product is taken in place by numpy, which
+    ran a complex64 product about 10x as fast as torch's (whose conjugate views cost 2x more again)."""
+    shape = (x.shape[-2], x.shape[-1])
+    if not (_scipy_ok(x) and _scipy_ok(transfer)) or x.dtype not in (torch.float32, torch.float64):
+        return irfft2(rfft2(x) * transfer, shape)
+    workers = torch.get_num_threads()
+    spectrum = scipy.fft.rfft2(x.detach().numpy(), workers=workers)
+    np.multiply(spectrum, transfer.detach().resolve_conj().numpy(), out=spectrum)
+    return torch.from_numpy(scipy.fft.irfft2(spectrum, s=shape, workers=workers, overwrite_x=True))
 
 
 def rfft_otf(psf: Tensor, shape: tuple[int, int]) -> Tensor:

@@ -47,7 +47,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from attacks.base import FitContext, Restorer, ThreatModel
-from attacks.real_fft import OtfCache, image_chunks, irfft2, rfft2
+from attacks.real_fft import OtfCache, circular_filter, image_chunks, irfft2, rfft2
 
 __all__ = [
     "ADC_NOISE_SIGMA",
@@ -172,7 +172,7 @@ def edge_taper(padded: Tensor, otf: Tensor, pad: tuple[int, int]) -> Tensor:
     Returns:
         Tapered images, shape (B, C, H', W'), same dtype and device.
     """
-    blurred = irfft2(rfft2(padded) * otf, (padded.shape[-2], padded.shape[-1]))
+    blurred = circular_filter(padded, otf)
     weight = torch.outer(
         _taper_1d(padded.shape[-2], pad[0], padded), _taper_1d(padded.shape[-1], pad[1], padded)
     )

@@ -66,3 +66,13 @@ def test_image_chunks_cover_the_batch_under_the_byte_bound(monkeypatch):
     assert [(s.start, s.stop) for s in image_chunks(7, 30)] == [(0, 3), (3, 6), (6, 9)]
     assert len(list(image_chunks(3, 1000))) == 3  # never fewer than one image
     assert list(image_chunks(0, 30)) == []
+
+
+@pytest.mark.parametrize("dtype,atol", [(torch.float32, 2e-4), (torch.float64, 1e-10)])
+def test_circular_filter_equals_the_torch_product(dtype, atol):
+    g = torch.Generator().manual_seed(4)
+    x = torch.rand(2, 3, 21, 30, generator=g, dtype=dtype)
+    otf = rfft_otf(torch.rand(3, 5, 5, generator=g, dtype=dtype), (21, 30))
+    for transfer in (otf, otf.conj()):  # a lazy conjugate view too
+        reference = torch.fft.irfft2(torch.fft.rfft2(x) * transfer, s=(21, 30))
+        torch.testing.assert_close(real_fft.circular_filter(x, transfer), reference, atol=atol, rtol=0)
