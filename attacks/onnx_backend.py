@@ -83,15 +83,21 @@ class OnnxModel:
         options.intra_op_num_threads = threads or torch.get_num_threads()
         options.inter_op_num_threads = 1
         options.log_severity_level = 3
-        # No arena: it keeps each session's peak (about 2.3 GB for NAFNet on 4 quick scenes) after the
-        # call, and a run holds several restorers' sessions (a fresh quick run reached 24 GB with it).
-        options.enable_cpu_mem_arena = False
         self._session = ort.InferenceSession(onnx_bytes, options, providers=["CPUExecutionProvider"])
         self._input = self._session.get_inputs()[0].name
+        # The CPU arena hands each intermediate of a run memory freed by earlier ones; without it, every
+        # input size the session has not seen yet (the plate windows come in about 20) mallocs and
+        # page-faults each intermediate afresh: NAFNet's first call at 4 x 512 x 1024 took 27 s
+        # instead of 8 s on 2 cores. Shrinking the arena at the end of every run gives that memory
+        # back, so a run holding several restorers' sessions does not keep each one's peak (a fresh
+        # quick run once reached 24 GB with the arena kept): 0.8 GB resident after the call either way.
+        self._run_options = ort.RunOptions()
+        self._run_options.add_run_config_entry("memory.enable_memory_arena_shrinkage", "cpu:0")
 
     def __call__(self, x: Tensor) -> Tensor:
         """(B, C, H, W) float32 -> (B, C', H, W) float32 on ``x``'s device."""
-        out = self._session.run(None, {self._input: x.detach().cpu().float().contiguous().numpy()})[0]
+        feed = {self._input: x.detach().cpu().float().contiguous().numpy()}
+        out = self._session.run(None, feed, self._run_options)[0]
         return torch.from_numpy(out).to(device=x.device, dtype=x.dtype)
 
 
@@ -102,7 +108,8 @@ class InferenceEngine:
         model: The network, image (B, C, H, W) -> (B, C', H, W); put in eval mode, kept on its device.
         backend: "torch", "onnx" or "auto". "auto" on a CPU exports to ONNX now and, on the
             first call, times both backends on its first image (after a warm-up run each) and
-            keeps the faster for good; on another device, or if the export fails, it uses torch
+            keeps the faster for good (an engine of the same architecture at the same image
+            shape and thread count later in the process reuses those timings); on another device, or if the export fails, it uses torch
             (the reason is logged and kept in ``fallback_reason``).
             The first real batch, not a small probe, decides: on 2 cores the quick NAFNet ties
             at 256 x 256 but ONNX Runtime is 1.8x faster at 512 x 1024.
@@ -156,8 +163,11 @@ class InferenceEngine:
         return self._onnx if self.backend == "onnx" and self._onnx is not None else self._torch
 
     def _choose(self, image: Tensor) -> None:
-        runs = {"torch": self._torch, "onnx": self._onnx}
-        self.timings_s = {name: _time(run, image) for name, run in runs.items() if run is not None}
+        key = (_architecture(self.model), tuple(image.shape), torch.get_num_threads())
+        if key not in _TIMINGS_S:
+            runs = {"torch": self._torch, "onnx": self._onnx}
+            _TIMINGS_S[key] = {name: _time(run, image) for name, run in runs.items() if run is not None}
+        self.timings_s = dict(_TIMINGS_S[key])
         self.backend = min(self.timings_s, key=self.timings_s.__getitem__)
         log.info("inference backend %s (seconds per image: %s)", self.backend, self.timings_s)
 
@@ -181,6 +191,19 @@ class InferenceEngine:
         timings (``timings_s``), which vary run to run and would change the settings' hash."""
         return {"requested": self.requested, "backend": self.backend, "fallback_reason": self.fallback_reason,
                 "batch_pixels": self.batch_pixels}
+
+
+# Seconds per image of each backend, per (architecture, image shape, threads), timed once per process:
+# on 2 cores timing the quick NAFNet's two backends costs about 15 s (torch twice at 5-10 s), and
+# nafnet-known-pairs and nafnet-generic share the architecture. The weights' values do not change
+# the cost of a dense network.
+_TIMINGS_S: dict[tuple[Any, ...], dict[str, float]] = {}
+
+
+def _architecture(model: nn.Module) -> tuple[Any, ...]:
+    """The class and every parameter's and buffer's name and shape: what inference cost depends on."""
+    tensors = [*model.named_parameters(), *model.named_buffers()]
+    return (type(model).__qualname__, repr(model), tuple((name, tuple(t.shape)) for name, t in tensors))
 
 
 def _channels(model: nn.Module) -> int:

@@ -8,7 +8,9 @@ iterations go on, so the iteration count is the regulariser. It is CHOSEN on the
 ``fit`` runs the ladder ``ITERATION_LADDER`` on a few ``ctx.train_pairs`` batches and keeps the
 count with the best mean PSNR (recorded in ``describe()``).
 
-Implementation: batched per-channel FFT convolutions in torch. As in ``wiener-known-psf``
+Implementation: per-channel real-FFT convolutions (``attacks.real_fft``: scipy's pocketfft on the
+CPU, ``torch.fft`` elsewhere), the OTF computed once per image size and reused across batches,
+a few images at a time so that every temporary stays small. As in ``wiener-known-psf``
 (whose helpers it reuses) the sensor image is first divided by the per-channel gain, then
 reflect-padded by the PSF radius with the pad tapered into its circularly blurred copy
 (``edge_taper``), so the circular FFT model holds at the seam; the result is cropped and
@@ -28,7 +30,8 @@ from scipy.fft import next_fast_len
 from torch import Tensor
 
 from attacks.base import FitContext, Restorer, ThreatModel
-from attacks.wiener_known_psf import edge_taper, psf_to_otf
+from attacks.real_fft import OtfCache, circular_filter, image_chunks
+from attacks.wiener_known_psf import edge_taper
 
 __all__ = ["ITERATION_LADDER", "RichardsonLucyKnownPSF", "richardson_lucy", "richardson_lucy_iterates"]
 
@@ -41,13 +44,14 @@ _FIT_BATCHES = 2
 _EPS = 1e-12
 
 
-def richardson_lucy_iterates(y: Tensor, psf: Tensor, max_iterations: int, pad: bool = True
+def richardson_lucy_iterates(y: Tensor, psf: Tensor | OtfCache, max_iterations: int, pad: bool = True
                              ) -> Iterator[tuple[int, Tensor]]:
     """Yield ``(k, estimate_k)`` for k = 1..max_iterations of Richardson-Lucy.
 
     Args:
         y: Blurred non-negative images (B, C, H, W), any scale.
-        psf: (C, K, K) or (K, K), centred at [K // 2, K // 2], channels sum to 1.
+        psf: (C, K, K) or (K, K), centred at [K // 2, K // 2], channels sum to 1; or its
+            ``OtfCache``, which keeps the OTF of each grid size for the next call.
         max_iterations: Last iteration to yield.
         pad: Reflect-pad by the PSF radius with an edge taper (module docs); False deconvolves
             circularly.
@@ -55,21 +59,28 @@ def richardson_lucy_iterates(y: Tensor, psf: Tensor, max_iterations: int, pad: b
     Yields:
         k and the estimate after k iterations, (B, C, H, W), unclamped, same dtype as ``y``.
     """
+    otfs = psf if isinstance(psf, OtfCache) else OtfCache(psf)
     height, width = y.shape[-2:]
-    psf = psf.to(device=y.device, dtype=y.dtype)
-    top, bottom = _padding(height, psf.shape[-2] // 2) if pad else (0, 0)
-    left, right = _padding(width, psf.shape[-1] // 2) if pad else (0, 0)
+    top, bottom, left, right = _padding_of(y, otfs.psf, pad)
     grid = (height + top + bottom, width + left + right)
-    otf = psf_to_otf(psf, grid)[..., : grid[1] // 2 + 1]
+    otf = otfs(grid, y.dtype, y.device)
+    otf_conj = otf.conj().resolve_conj()  # materialised once, not in every product
     data = y
     if pad:
         data = edge_taper(F.pad(y, (left, right, top, bottom), mode="reflect"), otf, (top, left))
     estimate = torch.full_like(data, 0.5)
     for k in range(1, max_iterations + 1):
-        reblurred = torch.fft.irfft2(torch.fft.rfft2(estimate) * otf, s=grid)
+        reblurred = circular_filter(estimate, otf)
         ratio = data / (reblurred.clamp_min(0.0) + _EPS)
-        estimate = estimate * torch.fft.irfft2(torch.fft.rfft2(ratio) * otf.conj(), s=grid)
+        estimate = estimate * circular_filter(ratio, otf_conj)
         yield k, estimate[..., top : top + height, left : left + width]
+
+
+def _padding_of(y: Tensor, psf: Tensor, pad: bool) -> tuple[int, int, int, int]:
+    """(top, bottom, left, right) padding of images ``y`` for ``psf`` (none when not ``pad``)."""
+    if not pad:
+        return 0, 0, 0, 0
+    return (*_padding(y.shape[-2], psf.shape[-2] // 2), *_padding(y.shape[-1], psf.shape[-1] // 2))
 
 
 def _padding(size: int, radius: int) -> tuple[int, int]:
@@ -80,16 +91,32 @@ def _padding(size: int, radius: int) -> tuple[int, int]:
     return extra // 2, extra - extra // 2
 
 
-def richardson_lucy(y: Tensor, psf: Tensor, iterations: int, pad: bool = True) -> Tensor:
+def _chunks(y: Tensor, psf: Tensor, pad: bool) -> Iterator[slice]:
+    """Slices of the batch ``y`` whose padded spectra fit ``attacks.real_fft.CHUNK_BYTES``."""
+    top, bottom, left, right = _padding_of(y, psf, pad)
+    complex_bytes = 2 * y.element_size()
+    per_image = y.shape[-3] * (y.shape[-2] + top + bottom) * ((y.shape[-1] + left + right) // 2 + 1) * complex_bytes
+    return image_chunks(y.shape[0], per_image)
+
+
+def richardson_lucy(y: Tensor, psf: Tensor | OtfCache, iterations: int, pad: bool = True) -> Tensor:
     """Richardson-Lucy deconvolution after ``iterations`` iterations (``richardson_lucy_iterates``).
+
+    Images are deconvolved a few at a time (``attacks.real_fft.image_chunks``); each image's
+    result is independent of the others in its batch.
 
     Returns:
         Estimate (B, C, H, W), unclamped; ``y`` itself when ``iterations`` is 0.
     """
-    result = y
-    for _, result in richardson_lucy_iterates(y, psf, iterations, pad):
-        pass
-    return result
+    if iterations == 0:
+        return y
+    otfs = psf if isinstance(psf, OtfCache) else OtfCache(psf)
+    results = []
+    for chunk in _chunks(y, otfs.psf, pad):
+        for _, result in richardson_lucy_iterates(y[chunk], otfs, iterations, pad):
+            pass
+        results.append(result)
+    return torch.cat(results)
 
 
 def _psnr_db(x: Tensor, ref: Tensor) -> Tensor:
@@ -119,13 +146,13 @@ class RichardsonLucyKnownPSF(Restorer):
         self._fixed = iterations
         self.iterations = iterations
         self.ladder_psnr_db: dict[int, float] = {}
-        self._psf: Tensor | None = None
+        self._psf: OtfCache | None = None
         self._gain: Tensor | None = None
 
     def fit(self, ctx: FitContext) -> None:
         """Measure the PSF and gain; choose the iteration count on ``ctx.train_pairs``."""
         assert ctx.lens is not None  # checked by `requires`
-        self._psf = ctx.lens.psf().detach()
+        self._psf = OtfCache(ctx.lens.psf().detach())
         self._gain = ctx.lens.gain().detach()
         if self._fixed is not None:
             return
@@ -137,10 +164,12 @@ class RichardsonLucyKnownPSF(Restorer):
         for batch, (sensor, sharp) in enumerate(ctx.train_pairs()):
             if batch == _FIT_BATCHES:
                 break
+            divided = self._divide_gain(sensor)
             with torch.no_grad():
-                for k, estimate in richardson_lucy_iterates(self._divide_gain(sensor), self._psf, ITERATION_LADDER[-1]):
-                    if k in totals:
-                        totals[k] += float(_psnr_db(estimate.clamp(0.0, 1.0), sharp).sum())
+                for chunk in _chunks(divided, self._psf.psf, True):
+                    for k, estimate in richardson_lucy_iterates(divided[chunk], self._psf, ITERATION_LADDER[-1]):
+                        if k in totals:
+                            totals[k] += float(_psnr_db(estimate.clamp(0.0, 1.0), sharp[chunk]).sum())
             n_images += sensor.shape[0]
         self.ladder_psnr_db = {k: total / max(n_images, 1) for k, total in totals.items()}
         self.iterations = max(self.ladder_psnr_db, key=lambda k: self.ladder_psnr_db[k])

@@ -38,6 +38,8 @@ s=3 n=0.02: 22.45 / 25.11 / 25.17. Without the edge taper, s=4 n=0.001 falls to 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import torch
@@ -45,6 +47,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from attacks.base import FitContext, Restorer, ThreatModel
+from attacks.real_fft import OtfCache, circular_filter, image_chunks, irfft2, rfft2
 
 __all__ = [
     "ADC_NOISE_SIGMA",
@@ -53,7 +56,7 @@ __all__ = [
     "edge_taper",
     "estimate_noise_sigma",
     "power_law_nsr",
-    "psf_to_otf",
+    "wiener_chunks",
     "wiener_deconvolve",
 ]
 
@@ -69,27 +72,6 @@ _N_BANDS = 24
 _MIN_BAND_SNR = 2.0
 _MIN_BAND_OTF_POWER = 1e-3
 _ALPHA_RANGE = (1.0, 4.0)
-
-
-def psf_to_otf(psf: Tensor, shape: tuple[int, int]) -> Tensor:
-    """Optical transfer function of a centred PSF on an ``shape`` grid (circular convolution).
-
-    Args:
-        psf: Shape (..., K_h, K_w), centre at [K_h // 2, K_w // 2], real.
-        shape: (H, W) of the image grid the OTF applies to. A PSF larger than the grid wraps
-            around (summed), which is the exact circular operator.
-
-    Returns:
-        Complex OTF, shape (..., H, W), full ``fft2`` layout (DC at [0, 0]).
-    """
-    k_h, k_w = psf.shape[-2:]
-    height, width = shape
-    rows = (torch.arange(k_h, device=psf.device) - k_h // 2) % height
-    cols = (torch.arange(k_w, device=psf.device) - k_w // 2) % width
-    flat_index = (rows[:, None] * width + cols[None, :]).reshape(-1)
-    grid = psf.new_zeros(*psf.shape[:-2], height * width)
-    grid.index_add_(-1, flat_index, psf.reshape(*psf.shape[:-2], k_h * k_w))
-    return torch.fft.fft2(grid.reshape(*psf.shape[:-2], height, width))
 
 
 def estimate_noise_sigma(y: Tensor, min_sigma: float = ADC_NOISE_SIGMA) -> Tensor:
@@ -124,7 +106,7 @@ def bayer_noise_sigma(y: Tensor, min_sigma: float = ADC_NOISE_SIGMA) -> Tensor:
 
 
 def power_law_nsr(
-    y: Tensor, psf: Tensor, sigma: Tensor, grid_shape: tuple[int, int]
+    y: Tensor, psf: Tensor | OtfCache, sigma: Tensor, grid_shape: tuple[int, int]
 ) -> Tensor:
     """Noise-to-signal ratio per frequency: white noise over a power-law scene spectrum.
 
@@ -134,7 +116,8 @@ def power_law_nsr(
 
     Args:
         y: Blurred noisy images, shape (B, C, H, W), unpadded.
-        psf: Shape (C, K, K) or (K, K), centred at [K // 2, K // 2], channels sum to 1.
+        psf: Shape (C, K, K) or (K, K), centred at [K // 2, K // 2], channels sum to 1; or its
+            ``OtfCache``.
         sigma: Noise standard deviation, shape (B, C), in the units of ``y``.
         grid_shape: (H', W') of the (padded) grid the filter is applied on.
 
@@ -143,25 +126,14 @@ def power_law_nsr(
     """
     height, width = y.shape[-2:]
     n_pixels = height * width
-    window = torch.outer(
-        torch.hann_window(height, periodic=False, dtype=y.dtype, device=y.device),
-        torch.hann_window(width, periodic=False, dtype=y.dtype, device=y.device),
-    )
+    otfs = psf if isinstance(psf, OtfCache) else OtfCache(psf)
+    bands = otfs.derived(("wiener-bands", height, width, y.dtype, y.device),
+                         lambda: _frequency_bands(otfs, height, width, y.dtype, y.device))
     # Hann window and mean removal keep the border jump and DC from leaking into the high
     # frequencies, where dividing by a small |H|^2 would turn leakage into fake signal.
-    centred = (y - y.mean(dim=(-2, -1), keepdim=True)) * window
-    periodogram = torch.fft.rfft2(centred).abs() ** 2 * (n_pixels / window.square().sum())
-    otf_power = psf_to_otf(psf, (height, width))[..., : width // 2 + 1].abs() ** 2
-    radius = _radial_frequency(height, width, y)
-    edges = torch.logspace(
-        math.log10(1.0 / min(height, width)), math.log10(0.5 * math.sqrt(2.0)), _N_BANDS + 1,
-        dtype=y.dtype, device=y.device,
-    )
-    band = (torch.bucketize(radius.flatten(), edges) - 1).clamp(-1, _N_BANDS)
-    inside = (band >= 0) & (band < _N_BANDS)
-    band_power = _band_mean(periodogram, band, inside)
-    band_otf = _band_mean(otf_power, band, inside)
-    band_freq = _band_mean(radius, band, inside)
+    centred = (y - y.mean(dim=(-2, -1), keepdim=True)) * bands.window
+    band_power = _band_mean(rfft2(centred).abs() ** 2 * bands.window_gain, bands.index, bands.counts)
+    band_otf, band_freq = bands.otf_power, bands.freq
     noise_power = n_pixels * sigma[..., None] ** 2
     usable = (band_power > _MIN_BAND_SNR * noise_power) & (band_otf > _MIN_BAND_OTF_POWER)
     log_f = torch.where(usable, band_freq.clamp_min(1e-12).log(), 0.0)
@@ -176,7 +148,7 @@ def power_law_nsr(
     slope = (d_f * (log_s - mean_s[..., None])).sum(-1) / d_f.square().sum(-1).clamp_min(1e-12)
     alpha = (-slope).clamp(*_ALPHA_RANGE)
     log_amplitude = torch.where(n_usable >= 2, mean_s + alpha * mean_f, -math.inf)
-    grid_radius = _radial_frequency(*grid_shape, y)
+    grid_radius = otfs.derived(("radius", grid_shape, y.dtype, y.device), lambda: _radial_frequency(*grid_shape, y))
     scene_inverse = grid_radius ** alpha[..., None, None] * torch.exp(-log_amplitude)[..., None, None]
     nsr = noise_power[..., None] * scene_inverse
     return torch.where(grid_radius > 0, nsr, 0.0)
@@ -200,7 +172,7 @@ def edge_taper(padded: Tensor, otf: Tensor, pad: tuple[int, int]) -> Tensor:
     Returns:
         Tapered images, shape (B, C, H', W'), same dtype and device.
     """
-    blurred = torch.fft.irfft2(torch.fft.rfft2(padded) * otf, s=padded.shape[-2:])
+    blurred = circular_filter(padded, otf)
     weight = torch.outer(
         _taper_1d(padded.shape[-2], pad[0], padded), _taper_1d(padded.shape[-1], pad[1], padded)
     )
@@ -209,7 +181,7 @@ def edge_taper(padded: Tensor, otf: Tensor, pad: tuple[int, int]) -> Tensor:
 
 def wiener_deconvolve(
     y: Tensor,
-    psf: Tensor,
+    psf: Tensor | OtfCache,
     balance: float | None = None,
     pad: bool = True,
     min_sigma: float = ADC_NOISE_SIGMA,
@@ -219,7 +191,8 @@ def wiener_deconvolve(
 
     Args:
         y: Blurred images, shape (B, C, H, W), any real dtype and device.
-        psf: Shape (C, K, K) (or (K, K), shared), centre at [K // 2, K // 2], channels sum to 1.
+        psf: Shape (C, K, K) (or (K, K), shared), centre at [K // 2, K // 2], channels sum to 1;
+            or its ``OtfCache``, which keeps the OTF of each grid size for the next call.
         balance: Constant NSR for every frequency (``skimage.restoration.wiener``'s
             ``balance`` with an identity regularizer); None estimates a per-image, per-channel,
             per-frequency NSR from ``y`` (noise MAD and a fitted power-law scene, module docs).
@@ -234,12 +207,10 @@ def wiener_deconvolve(
         Deconvolved images, shape (B, C, H, W), same dtype and device as ``y``, not clamped.
     """
     height, width = y.shape[-2:]
-    psf = psf.to(device=y.device, dtype=y.dtype)
-    # torch's reflect padding must be smaller than the image; tiny images get less padding.
-    pad_h = min(psf.shape[-2] // 2, height - 1) if pad else 0
-    pad_w = min(psf.shape[-1] // 2, width - 1) if pad else 0
+    otfs = psf if isinstance(psf, OtfCache) else OtfCache(psf)
+    pad_h, pad_w = _padding(y, otfs.psf, pad)
     grid = (height + 2 * pad_h, width + 2 * pad_w)
-    otf = psf_to_otf(psf, grid)[..., : grid[1] // 2 + 1]
+    otf = otfs(grid, y.dtype, y.device)
     padded = y
     if pad:
         padded = F.pad(y, (pad_w, pad_w, pad_h, pad_h), mode="reflect")
@@ -247,12 +218,29 @@ def wiener_deconvolve(
     if balance is None:
         if sigma is None:
             sigma = estimate_noise_sigma(y, min_sigma)
-        nsr = power_law_nsr(y, psf, sigma.to(y.dtype), grid)
+        nsr = power_law_nsr(y, otfs, sigma.to(y.dtype), grid)
     else:
         nsr = torch.as_tensor(balance, dtype=y.dtype, device=y.device)
-    spectrum = otf.conj() * torch.fft.rfft2(padded) / (otf.abs() ** 2 + nsr)
-    restored = torch.fft.irfft2(spectrum, s=grid)
+    spectrum = otf.conj() * rfft2(padded) / (otf.abs() ** 2 + nsr)
+    restored = irfft2(spectrum, grid)
     return restored[..., pad_h : pad_h + height, pad_w : pad_w + width]
+
+
+def _padding(y: Tensor, psf: Tensor, pad: bool) -> tuple[int, int]:
+    """Padding (rows, cols) on each side: the PSF radius, less for tiny images (torch's reflect
+    padding must be smaller than the image), none when not ``pad``."""
+    if not pad:
+        return 0, 0
+    return min(psf.shape[-2] // 2, y.shape[-2] - 1), min(psf.shape[-1] // 2, y.shape[-1] - 1)
+
+
+def wiener_chunks(y: Tensor, psf: Tensor, pad: bool = True) -> Iterator[slice]:
+    """Slices of the batch ``y`` (B, C, H, W) whose padded spectra fit ``attacks.real_fft.CHUNK_BYTES``:
+    every image is filtered on its own, so ``wiener_deconvolve`` of a chunk equals that chunk of
+    the whole batch's result."""
+    pad_h, pad_w = _padding(y, psf, pad)
+    per_image = y.shape[-3] * (y.shape[-2] + 2 * pad_h) * ((y.shape[-1] + 2 * pad_w) // 2 + 1) * 2 * y.element_size()
+    return image_chunks(y.shape[0], per_image)
 
 
 def _radial_frequency(height: int, width: int, like: Tensor) -> Tensor:
@@ -262,13 +250,42 @@ def _radial_frequency(height: int, width: int, like: Tensor) -> Tensor:
     return torch.sqrt(fy[:, None] ** 2 + fx[None, :] ** 2)
 
 
-def _band_mean(values: Tensor, band: Tensor, inside: Tensor) -> Tensor:
-    """Mean of ``values`` (..., H, W') over each frequency band -> (..., _N_BANDS)."""
-    index = band[inside]
-    flat = values.flatten(-2)[..., inside]
-    sums = values.new_zeros(*values.shape[:-2], _N_BANDS).index_add_(-1, index, flat)
-    counts = torch.bincount(index, minlength=_N_BANDS).to(values.dtype)
-    return sums / counts.clamp_min(1.0)
+@dataclass(frozen=True)
+class _FrequencyBands:
+    """The log-spaced radial bands of an (H, W) image's ``rfft2`` grid, and the PSF's place in them."""
+
+    window: Tensor      # (H, W) 2-D Hann window
+    window_gain: float  # H W / sum(window^2): makes the windowed periodogram unbiased for white noise
+    index: Tensor       # (H * (W // 2 + 1),) band of each frequency; _N_BANDS for one outside every band
+    counts: Tensor      # (_N_BANDS,) frequencies per band, at least 1
+    freq: Tensor        # (_N_BANDS,) mean |f| per band, cycles per pixel
+    otf_power: Tensor   # (C, _N_BANDS) or (_N_BANDS,) mean |H|^2 per band
+
+
+def _frequency_bands(otfs: OtfCache, height: int, width: int, dtype: torch.dtype, device: torch.device
+                     ) -> _FrequencyBands:
+    """The bands of ``power_law_nsr`` for (height, width) images; the same for every image of that size."""
+    like = torch.empty(0, dtype=dtype, device=device)
+    window = torch.outer(torch.hann_window(height, periodic=False, dtype=dtype, device=device),
+                         torch.hann_window(width, periodic=False, dtype=dtype, device=device))
+    radius = _radial_frequency(height, width, like)
+    edges = torch.logspace(
+        math.log10(1.0 / min(height, width)), math.log10(0.5 * math.sqrt(2.0)), _N_BANDS + 1,
+        dtype=dtype, device=device,
+    )
+    band = torch.bucketize(radius.flatten(), edges) - 1
+    index = torch.where((band >= 0) & (band < _N_BANDS), band, _N_BANDS)
+    counts = torch.bincount(index, minlength=_N_BANDS + 1)[:_N_BANDS].to(dtype).clamp_min(1.0)
+    otf_power = otfs((height, width), dtype, device).abs() ** 2
+    return _FrequencyBands(window, float(height * width / window.square().sum()), index, counts,
+                           _band_mean(radius, index, counts), _band_mean(otf_power, index, counts))
+
+
+def _band_mean(values: Tensor, index: Tensor, counts: Tensor) -> Tensor:
+    """Mean of ``values`` (..., H, W // 2 + 1) over each frequency band -> (..., _N_BANDS), given
+    each frequency's band ``index`` and the ``counts`` of ``_FrequencyBands``."""
+    sums = values.new_zeros(*values.shape[:-2], _N_BANDS + 1).index_add_(-1, index, values.flatten(-2))
+    return sums[..., :_N_BANDS] / counts
 
 
 def _taper_1d(length: int, pad: int, like: Tensor) -> Tensor:
@@ -290,13 +307,13 @@ class WienerKnownPSF(Restorer):
     requires: ClassVar[frozenset[str]] = frozenset({"lens"})
 
     def __init__(self) -> None:
-        self._psf: Tensor | None = None
+        self._psf: OtfCache | None = None
         self._gain: Tensor | None = None
 
     def fit(self, ctx: FitContext) -> None:
         """Measure the camera: store ``ctx.lens.psf()`` (3, K, K) and ``ctx.lens.gain()`` (3,)."""
         assert ctx.lens is not None  # guaranteed by the `requires` check that wraps fit
-        self._psf = ctx.lens.psf().detach()
+        self._psf = OtfCache(ctx.lens.psf().detach())
         self._gain = ctx.lens.gain().detach()
 
     def restore(self, sensor: Tensor) -> Tensor:
@@ -305,7 +322,9 @@ class WienerKnownPSF(Restorer):
             raise RuntimeError(f"{self.name}: call fit(FitContext(lens=...)) before restore()")
         gain = self._gain.to(device=sensor.device, dtype=sensor.dtype)
         # Lens access includes the sensor layout: the noise is measured on the raw RGGB sites.
-        deblurred = wiener_deconvolve(sensor, self._psf, sigma=bayer_noise_sigma(sensor))
+        # A few images at a time keep every temporary small (attacks.real_fft).
+        deblurred = torch.cat([wiener_deconvolve(sensor[chunk], self._psf, sigma=bayer_noise_sigma(sensor[chunk]))
+                               for chunk in wiener_chunks(sensor, self._psf.psf)])
         return (deblurred / gain[:, None, None]).clamp(0.0, 1.0)
 
     def describe(self) -> dict[str, Any]:

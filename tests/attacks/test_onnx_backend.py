@@ -85,3 +85,27 @@ def test_describe_records_the_choice_of_auto():
     assert described["requested"] == "auto" and described["fallback_reason"] is None
     assert described["backend"] == min(engine.timings_s, key=engine.timings_s.get)
     assert "timings_s" not in described  # settings must hash the same run to run
+
+
+def test_auto_times_each_architecture_and_shape_once_per_process(monkeypatch):
+    from attacks import onnx_backend
+
+    timed = []
+
+    def fake_time(run, x, repeats=1):
+        timed.append(tuple(x.shape))
+        return 2.0 if run.__class__.__name__ == "OnnxModel" else 1.0
+
+    monkeypatch.setattr(onnx_backend, "_TIMINGS_S", {})
+    monkeypatch.setattr(onnx_backend, "_time", fake_time)
+    first, same = InferenceEngine(_red10(), "auto", export_hw=(32, 32)), InferenceEngine(_red10(), "auto", export_hw=(32, 32))
+    wider = InferenceEngine(RED10(width=16).eval(), "auto", export_hw=(32, 32))
+    x = torch.rand(1, 3, 32, 48)
+    first(x)
+    same(x)
+    assert timed == [(1, 3, 32, 48)] * 2  # both backends of the first engine, none for the second
+    assert same.backend == first.backend == "torch" and same.timings_s == first.timings_s
+    same(torch.rand(1, 3, 16, 48))  # decided for good: a later shape is not timed
+    wider(x)
+    InferenceEngine(_red10(), "auto", export_hw=(32, 32))(torch.rand(1, 3, 16, 16))
+    assert timed == [(1, 3, 32, 48)] * 4 + [(1, 3, 16, 16)] * 2  # another architecture, another shape
