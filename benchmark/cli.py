@@ -99,6 +99,9 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--migrate", action="store_true",
                      help="first rewrite stored entries of an older format in the current one "
                           "(leaderboard_entries.ENTRY_VERSION)")
+    rep.add_argument("--publish", type=Path, action="append", default=[], metavar="RUN_DIR",
+                     help="first publish a finished run from its folder (its results.json), as `run --publish` "
+                          "would have; repeatable")
     mask = sub.add_parser("export-mask", help="write a lens's phase mask as a height map (um) a fab or Zemax can read")
     mask.add_argument("lens", metavar="LENS",
                       help="registered lens name, a .toml spec, or a leaderboard entry .json (its published mask)")
@@ -207,6 +210,11 @@ def cmd_report(args: argparse.Namespace) -> int:
     if not (directory / "entries").is_dir():
         raise ValueError(f"no leaderboard entries in {directory / 'entries'}; publish some with "
                          "`python -m benchmark run --lens NAME --publish`")
+    if args.publish:
+        from benchmark import leaderboard
+        for run in args.publish:
+            for path in leaderboard.publish_results(run, directory):
+                print(f"published {path} from {run}")
     if args.migrate:
         for path in leaderboard_entries.migrate_directory(directory):
             print(f"migrated {path} to entry format {leaderboard_entries.ENTRY_VERSION}")

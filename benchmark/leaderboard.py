@@ -17,7 +17,7 @@ from typing import Any
 
 from benchmark import leaderboard_report
 from benchmark.leaderboard_entries import LEADERBOARD, Entry, entry_name, make_entry, write_entry
-from benchmark.schema import Row
+from benchmark.schema import Results, Row, read_results
 
 log = logging.getLogger(__name__)
 
@@ -89,3 +89,26 @@ def publish_run(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[st
         leaderboard_report.update_readme(LEADERBOARD.parent / "README.md", directory)
     log.info("published %d leaderboard entries; rendered %s", len(paths), directory / "README.md")
     return paths
+
+
+def lens_info_from_results(results: Results) -> dict[str, dict]:
+    """Per lens of a results file: its spec and Zernike coefficients (um), from its `lens` rows'
+    settings (what a run's lens task reports; `publish` stores them in the entry)."""
+    info: dict[str, dict] = {}
+    for row in results.rows:
+        spec = results.settings.get(row.settings_hash or "", {}).get("lens")
+        if row.kind == "lens" and row.lens not in info and isinstance(spec, dict):
+            info[row.lens] = {"spec": spec, "coefficients_um": list(spec["mask"]["zernike_um"])}
+    return info
+
+
+def publish_results(run: Path, directory: Path = LEADERBOARD) -> list[Path]:
+    """Publish a finished run from its folder (`run/results.json` and its pictures), as
+    `run --publish` would have: for runs made elsewhere (a cluster, a GPU machine) or without --publish."""
+    results = read_results(Path(run) / "results.json")
+    profile = results.meta.get("profile")
+    if not isinstance(profile, dict) or "name" not in profile:
+        raise ValueError(f"{Path(run) / 'results.json'} has no profile in its meta; only a run's own "
+                         "results.json can be published")
+    return publish_run(results.rows, profile, lens_info_from_results(results), Path(run), directory,
+                       results.settings)
