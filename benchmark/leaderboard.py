@@ -63,8 +63,9 @@ def publish(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[str, d
 
 
 def copy_run_pictures(out: Path, lens_names: Iterable[str], profile: str, samples: Path) -> list[Path]:
-    """Copy a published run's pictures into the leaderboard: each lens's first sample grid, and the
-    run's plate-accuracy-vs-width chart (named after the run's lenses: one chart per published run)."""
+    """Copy a published run's pictures into the leaderboard: each lens's first sample grid (and
+    co-design curves, for a trained lens), and the run's plate-accuracy-vs-width chart (named after
+    the run's lenses: one chart per published run)."""
     lens_names = list(lens_names)
     samples.mkdir(parents=True, exist_ok=True)
     copied = []
@@ -72,6 +73,10 @@ def copy_run_pictures(out: Path, lens_names: Iterable[str], profile: str, sample
         first = sorted(out.glob(f"samples_{name}_seed*.png"))
         if first:
             copied.append(Path(shutil.copyfile(first[0], samples / f"{name}__{profile}.png")))
+        # A co-designed lens's training curves (its first seed's), beside its samples.
+        curves = sorted(out.glob(f"curves_{name}_seed*.png"))
+        if curves:
+            copied.append(Path(shutil.copyfile(curves[0], samples / f"{name}__{profile}__curves.png")))
     chart = out / "plate_accuracy_vs_width.png"
     if chart.is_file():
         copied.append(Path(shutil.copyfile(chart, samples / f"plate_width__{profile}__{'+'.join(lens_names)}.png")))
