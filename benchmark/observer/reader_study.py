@@ -107,7 +107,9 @@ def run_reader_study(names: tuple[str, ...] = LENSES, readers: tuple[str, ...] =
 
 def combine(parts: list[Path], out_json: Path | None = OUT_JSON) -> dict:
     """One record from reader studies run apart (e.g. one lens per process): their plates and timings
-    together, summarised and checked again against the study as it stands now; written to `out_json`."""
+    together, summarised and checked again against the study as it stands now; written to `out_json`.
+    A lens read again in a later part replaces that lens's plates, spec and timing from earlier parts
+    (re-reading a lens whose spec changed never doubles its plates)."""
     records: list[dict] = []
     timing: dict = {}
     specs: dict = {}
@@ -117,8 +119,9 @@ def combine(parts: list[Path], out_json: Path | None = OUT_JSON) -> dict:
         first = first or part
         if any(part[k] != first[k] for k in ("profile", "scenes", "seed", "n_plates_target", "readers")):
             raise ValueError(f"{path} was read with other settings than {parts[0]}; they cannot be combined")
-        records += part["plates"]
-        timing.update(part["timing"])
+        again = set(part["lens_specs"])
+        records = [r for r in records if r["lens"] not in again] + part["plates"]
+        timing = {k: v for k, v in timing.items() if k not in again} | part["timing"]
         specs.update(part["lens_specs"])
     if first is None:
         raise ValueError("combine needs at least one reader-study file")

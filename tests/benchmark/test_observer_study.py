@@ -91,6 +91,15 @@ def test_reader_studies_read_apart_combine_and_are_checked_again(tmp_path):
     assert out["lenses"]["ideal"]["ideal-observer"]["bins"][0]["accuracy"] == 1.0
     assert out["lenses"]["defocus"]["ideal-observer"]["bins"][0]["n_plates"] == 5
     assert out["consistency"]["checked"] == ["defocus", "ideal"] and out["consistency"]["violations"] == []
+    again = json.loads(paths[1].read_text())  # ideal read again (e.g. its spec changed): replaces, never doubles
+    again["plates"] = again["plates"][:2]
+    again["timing"] = {"ideal": {"ideal-observer": {"seconds": 2.0}}}
+    paths.append(tmp_path / "ideal-again.json")
+    paths[-1].write_text(json.dumps(again))
+    out = reader_study.combine(paths, None)
+    assert len(out["plates"]) == 7 and out["timing"]["ideal"]["ideal-observer"]["seconds"] == 2.0
+    assert out["lenses"]["ideal"]["ideal-observer"]["bins"][0]["n_plates"] == 2
+    paths.pop()
     other = json.loads(paths[0].read_text())
     other["seed"] = 1
     paths[0].write_text(json.dumps(other))
