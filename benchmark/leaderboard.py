@@ -21,25 +21,61 @@ from benchmark.schema import Results, Row, read_results
 
 log = logging.getLogger(__name__)
 
-# Two entries measured the same thing when these agree; only then are their rows merged.
-_SAME_MEASUREMENT = ("profile_values", "coefficients_um", "lens_spec")
+def _seed_specs(entry: Entry) -> dict[int, Any]:
+    """The lens spec each seed of `entry` was measured with (from its rows' settings; a one-seed entry
+    without settings falls back on the entry's spec)."""
+    specs: dict[int, Any] = {}
+    for row in entry.rows:
+        spec = entry.settings.get(row.settings_hash or "", {}).get("lens")
+        if spec is not None:
+            specs.setdefault(row.seed, spec)
+    if not specs and len(entry.seeds) == 1:
+        specs[entry.seeds[0]] = entry.lens_spec
+    return specs
+
+
+def _design(spec: Any) -> Any:
+    """A co-designed lens's spec before training: everything but its trained coefficients and the
+    description naming its seed (every seed of one scheme shares it)."""
+    if not isinstance(spec, dict):
+        return spec
+    mask = {k: v for k, v in (spec.get("mask") or {}).items() if k != "zernike_um"}
+    return {**{k: v for k, v in spec.items() if k != "description"}, "mask": mask}
+
+
+def _trained_per_seed(lens: str) -> bool:
+    """Whether each seed of `lens` trains its own coefficients (a co-design scheme)."""
+    from benchmark.codesign.schemes import SCHEMES
+    return lens in SCHEMES
 
 
 def merge_entries(old: Entry, new: Entry) -> Entry:
-    """``new`` plus the rows of ``old`` whose attack chain ``new`` lacks, if both measured the same thing
-    (profile values, coefficients and lens spec); else ``new`` alone. Kept rows keep their provenance.
-    Only chains that ``new`` measured successfully replace stored ones: a failed attacker is recorded
-    without erasing an earlier measurement of it."""
-    if any(getattr(old, k) != getattr(new, k) for k in _SAME_MEASUREMENT):
+    """``new`` plus the rows of ``old`` whose (attack chain, seed) ``new`` lacks, if both measured the
+    same lens under the same profile; else ``new`` alone. Kept rows keep their provenance.
+
+    The same lens: the same spec, or for a co-designed lens the same design (its coefficients are
+    trained per seed, so a run of seed 1 adds to a stored seed 0). A seed both measured with different
+    specs (re-trained into other coefficients) is replaced whole. Only (chain, seed) pairs that
+    ``new`` measured successfully replace stored ones: a failed attacker is recorded without erasing
+    an earlier measurement of it. The entry's spec and coefficients are its lowest seed's."""
+    same = (lambda a, b: _design(a) == _design(b)) if _trained_per_seed(new.lens) else (lambda a, b: a == b)
+    if old.profile_values != new.profile_values or not same(old.lens_spec, new.lens_spec):
         return new
-    have = {row.attack for row in new.rows if row.ok}
-    kept = [row for row in old.rows if row.attack not in have]
+    old_specs, new_specs = _seed_specs(old), _seed_specs(new)
+    have = {(row.attack, row.seed) for row in new.rows if row.ok}
+    kept = [row for row in old.rows if (row.attack, row.seed) not in have
+            and (row.seed not in new_specs or old_specs.get(row.seed) == new_specs[row.seed])]
     if not kept:
         return new
+    rows = new.rows + kept
     used = {r.settings_hash for r in kept}
     settings = {**{k: v for k, v in old.settings.items() if k in used}, **new.settings}
-    return dataclasses.replace(new, rows=new.rows + kept, settings=settings,
-                               seeds=sorted({r.seed for r in new.rows + kept}))
+    seeds = sorted({r.seed for r in rows})
+    spec = new_specs.get(seeds[0], old_specs.get(seeds[0], new.lens_spec))
+    coefficients = (list(spec["mask"]["zernike_um"]) if isinstance(spec, dict) and "zernike_um" in spec.get("mask", {})
+                    else new.coefficients_um)
+    return dataclasses.replace(new, rows=rows, settings=settings, seeds=seeds, lens_spec=spec,
+                               coefficients_um=coefficients)
 
 
 def publish(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[str, dict],

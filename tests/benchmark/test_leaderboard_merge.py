@@ -122,3 +122,54 @@ def test_version_1_entries_migrate_without_loss(tmp_path):
 def test_unknown_versions_are_named(tmp_path):
     with pytest.raises(ValueError, match="entry_version 7"):
         Entry.from_json({**V1_ENTRY, "entry_version": 7})
+
+
+def _gp_run(seeds: dict[int, float], commit: str, attacks=("identity",)) -> tuple[list[Row], dict, dict]:
+    """Rows, settings and lens info of a run of co-designed `gp`: seed -> its trained Z4 coefficient."""
+    rows, settings, info = [], {}, {}
+    for seed, z4 in seeds.items():
+        spec = {"name": "gp", "description": f"co-designed, seed {seed}",
+                "mask": {"zernike_um": [0.0, 0.0, 0.0, z4], "bounds_um": [[-1, 1]] * 4}}
+        for a in attacks:
+            key = f"{a}-{seed}-{commit}"
+            settings[key] = {"attacker": a, "lens": spec}
+            rows.append(Row(kind="restorer", lens="gp", attack=a, restorer=a, seed=seed, profile="smoke",
+                            scenes="synthetic", metrics={"psnr_db": 20.0 + seed}, settings_hash=key,
+                            provenance={"git_commit": commit, "date": "d"}))
+        info.setdefault("gp", {"spec": spec, "coefficients_um": spec["mask"]["zernike_um"]})
+    return rows, settings, info
+
+
+def test_seeds_of_a_co_designed_lens_published_apart_add_up(tmp_path):
+    rows, settings, info = _gp_run({0: -0.3}, "aaa", attacks=("identity", "nafnet"))
+    (path,) = leaderboard.publish(rows, PROFILE, info, tmp_path, settings)
+    rows, settings, info = _gp_run({1: -0.5}, "bbb")  # seed 1 trained other coefficients: a new seed, not a new lens
+    leaderboard.publish(rows, PROFILE, info, tmp_path, settings)
+    entry = _load(path)
+    assert entry.seeds == [0, 1] and entry.chain("identity").seeds == (0, 1)
+    assert entry.chain("nafnet").seeds == (0,)
+    # The entry's spec and coefficients stay its lowest seed's.
+    assert entry.coefficients_um == [0.0, 0.0, 0.0, -0.3] and entry.lens_spec["description"].endswith("seed 0")
+
+
+def test_a_seed_re_trained_into_other_coefficients_replaces_that_seed_whole(tmp_path):
+    rows, settings, info = _gp_run({0: -0.3, 1: -0.5}, "aaa", attacks=("identity", "nafnet"))
+    (path,) = leaderboard.publish(rows, PROFILE, info, tmp_path, settings)
+    rows, settings, info = _gp_run({0: -0.1}, "bbb")  # seed 0 again, trained elsewhere: its old nafnet row goes too
+    leaderboard.publish(rows, PROFILE, info, tmp_path, settings)
+    entry = _load(path)
+    assert entry.chain("identity").seeds == (0, 1) and entry.chain("nafnet").seeds == (1,)
+    assert entry.coefficients_um == [0.0, 0.0, 0.0, -0.1]
+    assert entry.chain("identity").rows[0].provenance["git_commit"] == "bbb"
+
+
+def test_a_fixed_lens_with_other_coefficients_replaces_the_entry(tmp_path):
+    rows, settings, info = _gp_run({0: -0.3}, "aaa")
+    for r in rows:
+        r.lens = "defocus"
+    (path,) = leaderboard.publish(rows, PROFILE, {"defocus": info["gp"]}, tmp_path, settings)
+    rows, settings, info = _gp_run({1: -0.5}, "bbb")
+    for r in rows:
+        r.lens = "defocus"
+    leaderboard.publish(rows, PROFILE, {"defocus": info["gp"]}, tmp_path, settings)
+    assert _load(path).seeds == [1]
