@@ -293,9 +293,10 @@ def _utility(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     lens = _lens(cfg, task.lens, task.seed)
     net, fit_s = utility_net_for(lens, task.lens, task.seed, cfg)
     sensor = sense(lens, to_tensor(scenes), cfg.profile.batch_size, task.seed, cfg.device)
-    metrics, confusion = utility_scores(net, sensor, scenes, cfg)
+    metrics, confusion = utility_scores(net, sensor, scenes, cfg, lens)
     builder = _builder(cfg, task.lens, task.seed, lens)
-    row = builder.row("utility", {**metrics, "fit_s": fit_s})
+    row = builder.row("utility", {**metrics, "fit_s": fit_s},
+                      notes={"utility_input": "sensor image white-balanced by the sensor's known gain"})
     utility_intervals(row, confusion)
     row.set_units(utility_units(scenes, confusion))
     return TaskResult([row], builder.settings)
@@ -345,7 +346,7 @@ def _evaluate(task: Task, cfg: RunConfig, staging: Path) -> TaskResult:
     sharp = to_tensor(scenes)
     clean = _clean_net(cfg, task.seed, scenes)
     lens_net = utility_net_for(lens, task.lens, task.seed, cfg)[0] if clean is not None else None
-    segment_sensor = segmenter(lens_net, cfg) if lens_net is not None else None
+    segment_sensor = segmenter(lens_net, cfg, lens) if lens_net is not None else None
     target = Target(task.lens, scenes, sharp, sense(lens, sharp, cfg.profile.batch_size, task.seed, cfg.device),
                     fit_context(lens, cfg, task.seed, segment_sensor), segment_sensor,
                     segmenter(clean, cfg) if clean is not None else None, plate_set(cfg, task.seed, lens))

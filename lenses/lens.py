@@ -58,6 +58,11 @@ class Lens(torch.nn.Module):
         """Expected sensor value per unit scene radiance, per channel (3,) (QE and exposure tint)."""
         return self.sensor.gain()
 
+    def white_balance(self, sensor: torch.Tensor) -> torch.Tensor:
+        """The camera's white balance: sensor images (B,3,H,W) divided by the known per-channel gain,
+        clamped to [0, 1]. What the utility network sees (and the `identity` attacker returns)."""
+        return (sensor / self.gain().to(sensor).view(1, -1, 1, 1)).clamp(0.0, 1.0)
+
     def irradiance(self, x: torch.Tensor) -> torch.Tensor:
         """Noise-free optical image on the sensor (B,3,H,W): the scene convolved with the PSF."""
         k = self.geometry.psf_size_px

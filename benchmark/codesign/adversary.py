@@ -55,7 +55,7 @@ def build_adversary(width: int, lens: Lens | None = None) -> RED10:
 
 def white_balanced(sensor: torch.Tensor, lens: Lens) -> torch.Tensor:
     """The trivial attack: sensor (B,3,H,W) divided by the per-channel gain, clamped to [0, 1]."""
-    return (sensor / lens.gain().to(sensor).view(1, -1, 1, 1)).clamp(0.0, 1.0)
+    return lens.white_balance(sensor)
 
 
 class Probe:

@@ -61,7 +61,7 @@ log = logging.getLogger(__name__)
 
 IGNORE = 255
 # Bumped whenever the loop changes what it computes, so stale cache entries are not reused.
-TRAINER_VERSION = 3
+TRAINER_VERSION = 4  # 4: the utility net sees white-balanced sensor images
 
 
 class TrainingDivergedError(RuntimeError):
@@ -289,8 +289,10 @@ class CoDesign:
         def deb_loss(net: torch.nn.Module, images: torch.Tensor) -> torch.Tensor:
             return F.mse_loss(net(images), x, reduction=rep.reduction) * w_deb
 
-        # 1) the networks, on the detached sensor image
-        loss_seg = seg_loss(state.seg_fit, sensor.detach())
+        # 1) the networks, on the detached sensor image (the utility net sees it white-balanced: the
+        # camera's fixed ISP step, so the net is not asked to learn the sensor's tint)
+        balanced = state.lens.white_balance(sensor)
+        loss_seg = seg_loss(state.seg_fit, balanced.detach())
         stats = {"seg": rep.item(loss_seg.detach())}
         state.opt_seg.zero_grad(set_to_none=True)
         loss_seg.backward()
@@ -304,7 +306,7 @@ class CoDesign:
         self._guard(step, stats)
         # 2) the optics, through the updated networks
         if state.opt_optics is not None:
-            ctx = OpticsContext(state.lens.coefficients_um, seg_loss(seg, sensor),
+            ctx = OpticsContext(state.lens.coefficients_um, seg_loss(seg, balanced),
                                 deb_loss(deb, sensor) if deb is not None else None, state.lens, rep)
             terms, optics_stats = state.balance.optics_terms(ctx)
             stats.update(optics_stats)

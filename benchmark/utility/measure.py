@@ -25,39 +25,45 @@ class Segmenter:
     """images (B,3,H,W) in [0,1] -> train ids (B,H,W), by sliding-window inference of ``net``.
 
     The windows run through ``segformer_engine`` (ONNX Runtime on the CPU, torch elsewhere or if the
-    export fails); ``describe()`` says which, for the row that reports the scores.
+    export fails); ``describe()`` says which, for the row that reports the scores. Given a ``lens``,
+    its sensor images are white-balanced first (``Lens.white_balance``), as its network was trained.
     """
 
-    def __init__(self, net: torch.nn.Module, cfg: RunConfig) -> None:
-        self.net, self.cfg = net, cfg
+    def __init__(self, net: torch.nn.Module, cfg: RunConfig, lens: lenses.Lens | None = None) -> None:
+        self.net, self.cfg, self.lens = net, cfg, lens
         self.window, self.stride = window_for(cfg.profile.image_size, cfg.profile.train_crop)
         self.engine = segformer_engine(net.eval(), cfg.cache_dir, self.window)
 
     def __call__(self, images: torch.Tensor) -> torch.Tensor:
+        if self.lens is not None:
+            images = self.lens.white_balance(images)
         return predict(self.net, images, self.window, self.stride, self.cfg.profile.batch_size, self.cfg.device,
                        logits=self.engine).to(images.device)
 
     def describe(self) -> dict[str, object]:
-        """The inference backend in use (``InferenceEngine.describe``)."""
-        return self.engine.describe()
+        """The inference backend in use (``InferenceEngine.describe``) and the input it is given."""
+        balance = "divide-by-known-sensor-gain" if self.lens is not None else "none"
+        return {**self.engine.describe(), "white_balance": balance}
 
 
-def segmenter(net: torch.nn.Module, cfg: RunConfig) -> Segmenter:
-    """images (B,3,H,W) in [0,1] -> train ids (B,H,W), by sliding-window inference (`Segmenter`)."""
-    return Segmenter(net, cfg)
+def segmenter(net: torch.nn.Module, cfg: RunConfig, lens: lenses.Lens | None = None) -> Segmenter:
+    """images (B,3,H,W) in [0,1] -> train ids (B,H,W), by sliding-window inference (`Segmenter`);
+    a lens's sensor images are white-balanced first (pass the `lens`)."""
+    return Segmenter(net, cfg, lens)
 
 
-def utility_metrics(net: torch.nn.Module, images: torch.Tensor, scenes: list[Scene], cfg: RunConfig
-                    ) -> dict[str, float]:
+def utility_metrics(net: torch.nn.Module, images: torch.Tensor, scenes: list[Scene], cfg: RunConfig,
+                    lens: lenses.Lens | None = None) -> dict[str, float]:
     """miou / mean_acc / overall_acc (+ per-class IoU columns) and images_per_s (`utility_scores`)."""
-    return utility_scores(net, images, scenes, cfg)[0]
+    return utility_scores(net, images, scenes, cfg, lens)[0]
 
 
-def utility_scores(net: torch.nn.Module, images: torch.Tensor, scenes: list[Scene], cfg: RunConfig
-                   ) -> tuple[dict[str, float], torch.Tensor]:
+def utility_scores(net: torch.nn.Module, images: torch.Tensor, scenes: list[Scene], cfg: RunConfig,
+                   lens: lenses.Lens | None = None) -> tuple[dict[str, float], torch.Tensor]:
     """miou / mean_acc / overall_acc (+ per-class IoU columns) and inference speed (images_per_s)
-    of `net` on images (N,3,H,W), and the per-scene confusion matrices (N, C, C) (for intervals)."""
-    segment = segmenter(net, cfg)  # exporting the graph (once per weights) is not inference time
+    of `net` on images (N,3,H,W) (a `lens`'s sensor images: white-balanced first), and the per-scene
+    confusion matrices (N, C, C) (for intervals)."""
+    segment = segmenter(net, cfg, lens)  # exporting the graph (once per weights) is not inference time
     t0 = time.perf_counter()
     pred = segment(images)
     speed = images.shape[0] / (time.perf_counter() - t0)

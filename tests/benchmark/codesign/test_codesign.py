@@ -167,3 +167,41 @@ def test_curves_are_written_as_json_lines_tensorboard_events_and_a_chart(tmp_pat
     assert {"loss/L_seg", "loss/L_deb", "grad_norm/seg", "grad_norm/deb", "lambda/deb", "psf_radius_px",
             "coefficients_um/Z4 defocus"} <= set(events.Tags()["scalars"])
     assert (d / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_utility_net_is_trained_on_white_balanced_sensor_images(tmp_path, monkeypatch):
+    """Every image the co-design segments is a white-balanced sensor image (the sensor's tint is the
+    camera's, not something the utility net must learn), while the adversary keeps the raw one."""
+    from benchmark.codesign import trainer as trainer_module
+    balanced, segmented = [], []
+    original_balance, original_logits = lenses.Lens.white_balance, trainer_module.segment_logits
+
+    def balance_spy(self, sensor):
+        out = original_balance(self, sensor)
+        balanced.append((sensor.detach().clone(), out.detach().clone()))
+        return out
+
+    def logits_spy(net, images):
+        segmented.append(images.detach().clone())
+        return original_logits(net, images)
+
+    monkeypatch.setattr(lenses.Lens, "white_balance", balance_spy)
+    monkeypatch.setattr(trainer_module, "segment_logits", logits_spy)
+    run("os-d-1", tmp_path, dataclasses.replace(TINY, codesign_steps=1)).train(progress=False)
+    assert segmented and balanced
+    outputs = [out for _, out in balanced]
+    assert all(any(torch.equal(seen, out) for out in outputs) for seen in segmented)
+    sensor, out = balanced[0]
+    assert not torch.allclose(sensor, out)  # the sensor is tinted: balancing changes it
+
+
+def test_white_balance_is_what_the_identity_attacker_returns():
+    import attacks
+    from attacks.base import FitContext
+    lens = lenses.Lens(load_spec(START_SPEC))
+    sensor = torch.rand(2, 3, 16, 24)
+    identity = attacks.load("identity")
+    identity.fit(FitContext(lens=lens, device="cpu"))
+    assert torch.equal(identity.restore(sensor), lens.white_balance(sensor))
+    expected = (sensor / lens.gain().view(1, 3, 1, 1)).clamp(0, 1)
+    assert torch.allclose(lens.white_balance(sensor), expected) and float(lens.white_balance(sensor).max()) <= 1.0
