@@ -27,7 +27,7 @@ def _seed_specs(entry: Entry) -> dict[int, Any]:
     specs: dict[int, Any] = {}
     for row in entry.rows:
         spec = entry.settings.get(row.settings_hash or "", {}).get("lens")
-        if spec is not None:
+        if isinstance(spec, dict):  # a reference (`sharp`) names itself instead of a spec
             specs.setdefault(row.seed, spec)
     if not specs and len(entry.seeds) == 1:
         specs[entry.seeds[0]] = entry.lens_spec

@@ -173,3 +173,12 @@ def test_a_fixed_lens_with_other_coefficients_replaces_the_entry(tmp_path):
         r.lens = "defocus"
     leaderboard.publish(rows, PROFILE, {"defocus": info["gp"]}, tmp_path, settings)
     assert _load(path).seeds == [1]
+
+
+def test_a_reference_without_a_spec_keeps_none_as_its_spec(tmp_path):
+    rows = _rows(["identity"], "aaa", seeds=(0, 1))
+    settings = {"identity-aaa": {"attacker": "identity", "lens": "sharp"}}  # what a run stores for `sharp`
+    (path,) = leaderboard.publish(rows, PROFILE, {}, tmp_path, settings)
+    leaderboard.publish(_rows(["identity"], "aaa", seeds=(0,)), PROFILE, {}, tmp_path, settings)
+    entry = _load(path)
+    assert entry.lens_spec is None and entry.coefficients_um is None and entry.seeds == [0, 1]
