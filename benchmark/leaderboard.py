@@ -43,6 +43,12 @@ def _design(spec: Any) -> Any:
     return {**{k: v for k, v in spec.items() if k != "description"}, "mask": mask}
 
 
+def _trainer_versions(entry: Entry) -> set[str | None]:
+    """The co-design trainer versions that made `entry`'s lens and utility rows (None: not noted,
+    e.g. rows published before the note existed)."""
+    return {row.notes.get("trainer_version") for row in entry.rows if row.kind in ("lens", "utility")}
+
+
 def _trained_per_seed(lens: str) -> bool:
     """Whether each seed of `lens` trains its own coefficients (a co-design scheme)."""
     from benchmark.codesign.schemes import SCHEMES
@@ -51,7 +57,8 @@ def _trained_per_seed(lens: str) -> bool:
 
 def merge_entries(old: Entry, new: Entry) -> Entry:
     """``new`` plus the rows of ``old`` whose (attack chain, seed) ``new`` lacks, if both measured the
-    same lens under the same profile; else ``new`` alone. Kept rows keep their provenance.
+    same lens under the same profile, with nets trained by the same co-design trainer version (rows'
+    note ``trainer_version``); else ``new`` alone. Kept rows keep their provenance.
 
     The same lens: the same spec, or for a co-designed lens the same design (its coefficients are
     trained per seed, so a run of seed 1 adds to a stored seed 0). A seed both measured with different
@@ -60,6 +67,9 @@ def merge_entries(old: Entry, new: Entry) -> Entry:
     an earlier measurement of it. The entry's spec and coefficients are its lowest seed's."""
     same = (lambda a, b: _design(a) == _design(b)) if _trained_per_seed(new.lens) else (lambda a, b: a == b)
     if old.profile_values != new.profile_values or not same(old.lens_spec, new.lens_spec):
+        return new
+    versions = _trainer_versions(old), _trainer_versions(new)
+    if all(versions) and versions[0] != versions[1]:  # nets trained by another trainer: not the same thing
         return new
     old_specs, new_specs = _seed_specs(old), _seed_specs(new)
     have = {(row.attack, row.seed) for row in new.rows if row.ok}

@@ -68,13 +68,16 @@ class RowBuilder:
 def training_facts(record: Mapping[str, Any] | None) -> tuple[dict[str, float], dict[str, str]]:
     """The lens row's facts from a co-design training record (benchmark.codesign): metric
     ``bound_limited`` (1.0 when the trained mask ended on a coefficient bound, else 0.0) and note
-    ``bound_limited_terms`` (the Zernike terms on a bound, e.g. "Z4, Z6"). Nothing for a lens that
-    was not trained, or whose mask has no bounds."""
+    ``bound_limited_terms`` (the Zernike terms on a bound, e.g. "Z4, Z6"), and note ``trainer_version``
+    (the co-design trainer's version: entries of other versions are not merged). Nothing for a lens
+    that was not trained, or whose mask has no bounds."""
     if not record or "bound_limited" not in record:
         return {}, {}
     terms = list(record.get("bound_limited_terms") or [])
+    version = (record.get("config") or {}).get("version")
     return {"bound_limited": float(bool(record["bound_limited"]))}, (
-        {"bound_limited_terms": ", ".join(terms)} if terms else {})
+        ({"bound_limited_terms": ", ".join(terms)} if terms else {})
+        | ({"trainer_version": str(version)} if version is not None else {}))
 
 
 def scene_units(scenes: Sequence[Scene], per_scene: Mapping[str, Sequence[float]]) -> Units:

@@ -29,6 +29,7 @@ from benchmark import profiling, task_costs
 from benchmark.attacker_objects import load as load_attacker
 from benchmark.budget import BudgetExceeded, time_budget
 from benchmark.cache import CHECKSUM_SUFFIX, ArtifactCache, discard, exclusive, read_verified, write_verified
+from benchmark.codesign.trainer import TRAINER_VERSION
 from benchmark.evaluation import (Attacked, PlateSet, Target, attempt, fit_readers, read_sensor, run_reader,
                                   run_restorers)
 from benchmark.intervals import utility_intervals
@@ -296,7 +297,9 @@ def _utility(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     metrics, confusion = utility_scores(net, sensor, scenes, cfg, lens)
     builder = _builder(cfg, task.lens, task.seed, lens)
     row = builder.row("utility", {**metrics, "fit_s": fit_s},
-                      notes={"utility_input": "sensor image white-balanced by the sensor's known gain"})
+                      notes={"utility_input": "sensor image white-balanced by the sensor's known gain",
+                             # the net was trained (or found in the cache, keyed by it) by this trainer
+                             "trainer_version": str(TRAINER_VERSION)})
     utility_intervals(row, confusion)
     row.set_units(utility_units(scenes, confusion))
     return TaskResult([row], builder.settings)

@@ -182,3 +182,27 @@ def test_a_reference_without_a_spec_keeps_none_as_its_spec(tmp_path):
     leaderboard.publish(_rows(["identity"], "aaa", seeds=(0,)), PROFILE, {}, tmp_path, settings)
     entry = _load(path)
     assert entry.lens_spec is None and entry.coefficients_um is None and entry.seeds == [0, 1]
+
+
+def test_nets_of_another_trainer_version_replace_the_entry(tmp_path):
+    """A seed trained by a newer co-design trainer never sits beside seeds of the old one."""
+    def run(seeds, commit, version):
+        rows, settings, info = _gp_run(seeds, commit)
+        for seed in seeds:
+            rows.append(Row(kind="utility", lens="gp", attack="utility", seed=seed, profile="smoke",
+                            scenes="synthetic", metrics={"miou": 0.2}, settings_hash=rows[0].settings_hash,
+                            notes={} if version is None else {"trainer_version": version},
+                            provenance={"git_commit": commit, "date": "d"}))
+        return rows, settings, info
+
+    rows, settings, info = run({0: -0.3, 1: -0.5}, "aaa", None)
+    (path,) = leaderboard.publish(rows, PROFILE, info, tmp_path, settings)
+    rows, settings, info = run({0: -0.2}, "bbb", "4")  # an old entry without the note: replaced
+    leaderboard.publish(rows, PROFILE, info, tmp_path, settings)
+    assert _load(path).seeds == [0]
+    rows, settings, info = run({1: -0.4}, "ccc", "4")  # the same version: seeds add up
+    leaderboard.publish(rows, PROFILE, info, tmp_path, settings)
+    assert _load(path).seeds == [0, 1]
+    rows, settings, info = run({1: -0.4}, "ddd", "5")  # another version: replaced
+    leaderboard.publish(rows, PROFILE, info, tmp_path, settings)
+    assert _load(path).seeds == [1] and _load(path).chain("utility").rows[0].provenance["git_commit"] == "ddd"

@@ -22,6 +22,8 @@ def test_training_facts_from_the_record():
     assert training_facts({"bound_limited": False, "bound_limited_terms": []}) == ({"bound_limited": 0.0}, {})
     assert training_facts(None) == ({}, {})
     assert training_facts({"name": "fixed-ideal"}) == ({}, {})  # a mask without bounds: nothing to say
+    assert training_facts({"bound_limited": False, "config": {"version": 4}}) == (
+        {"bound_limited": 0.0}, {"trainer_version": "4"})
 
 
 def _lens_row(lens, seed, flag=None, terms=""):
