@@ -19,7 +19,9 @@ Each finding says "holds", "does not hold" or "cannot tell at this sample size" 
 difference, its 95 % interval, the p-value and n (``benchmark.stats.verdict``); a claim that "a is
 no higher than b" holds only when a is significantly lower (equal within the interval: cannot
 tell). Entries without per-unit outcomes (published before they existed) get "cannot tell: entry
-has no per-unit outcomes (re-publish)": no pairing is ever guessed.
+has no per-unit outcomes (re-publish)": no pairing is ever guessed. Nor are entries whose nets (or,
+for two co-designed lenses, whose optics) were made by different co-design trainer versions (rows'
+note ``trainer_version``; "not noted" counts as a version of its own): "cannot tell: ... re-publish".
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from benchmark import stats
-from benchmark.leaderboard_entries import ATTACKER_KINDS, Entry, Stat
+from benchmark.leaderboard_entries import ATTACKER_KINDS, Entry, Stat, co_designed
 from benchmark.schema import Units
 
 N_RESAMPLES = 4000
@@ -241,9 +243,31 @@ def _figure(entry: Entry, measure: str, attack: str | None) -> Stat | None:
     return None if found is None else found[0]
 
 
+def _version_text(versions: set[str | None]) -> str:
+    return "/".join(sorted(v or "not noted" for v in versions))
+
+
+def _same_trainer(claim: Claim, ea: Entry, eb: Entry) -> None:
+    """Raise _Unpaired when the two sides were made by different co-design trainer versions: the
+    utility nets for mIoU (every lens's net is fine-tuned by the trainer), the optics for privacy
+    when both lenses are co-designed (a fixed lens's optics do not depend on the trainer)."""
+    if claim.measure == "miou":
+        kinds: tuple[str, ...] = ("utility",)
+    elif co_designed(ea.lens) and co_designed(eb.lens):
+        kinds = ("lens",)
+    else:
+        return
+    va, vb = ea.trainer_versions(kinds), eb.trainer_versions(kinds)
+    if va and vb and va != vb:
+        raise _Unpaired(f"cannot tell: {ea.lens} and {eb.lens} were trained by different co-design trainer "
+                        f"versions ({_version_text(va)} against {_version_text(vb)}; re-publish with the current one)")
+
+
 def check_claim(claim: Claim, ea: Entry, eb: Entry) -> Finding:
-    """Decide `claim` on the entries of its two lenses (one profile) by a paired comparison."""
+    """Decide `claim` on the entries of its two lenses (one profile) by a paired comparison; entries
+    made by different co-design trainer versions are not compared (``_same_trainer``)."""
     try:
+        _same_trainer(claim, ea, eb)
         comparison, attack_a, attack_b = _COMPARE[claim.measure](ea, eb)
     except _Unpaired as why:
         return Finding(ea.profile, claim.text, claim.a, claim.b, claim.measure, claim.source,

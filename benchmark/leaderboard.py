@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmark import leaderboard_report
-from benchmark.leaderboard_entries import LEADERBOARD, Entry, entry_name, make_entry, write_entry
+from benchmark.leaderboard_entries import LEADERBOARD, Entry, co_designed, entry_name, make_entry, write_entry
 from benchmark.schema import Results, Row, read_results
 
 log = logging.getLogger(__name__)
@@ -43,18 +43,6 @@ def _design(spec: Any) -> Any:
     return {**{k: v for k, v in spec.items() if k != "description"}, "mask": mask}
 
 
-def _trainer_versions(entry: Entry) -> set[str | None]:
-    """The co-design trainer versions that made `entry`'s lens and utility rows (None: not noted,
-    e.g. rows published before the note existed)."""
-    return {row.notes.get("trainer_version") for row in entry.rows if row.kind in ("lens", "utility")}
-
-
-def _trained_per_seed(lens: str) -> bool:
-    """Whether each seed of `lens` trains its own coefficients (a co-design scheme)."""
-    from benchmark.codesign.schemes import SCHEMES
-    return lens in SCHEMES
-
-
 def merge_entries(old: Entry, new: Entry) -> Entry:
     """``new`` plus the rows of ``old`` whose (attack chain, seed) ``new`` lacks, if both measured the
     same lens under the same profile, with nets trained by the same co-design trainer version (rows'
@@ -65,10 +53,10 @@ def merge_entries(old: Entry, new: Entry) -> Entry:
     specs (re-trained into other coefficients) is replaced whole. Only (chain, seed) pairs that
     ``new`` measured successfully replace stored ones: a failed attacker is recorded without erasing
     an earlier measurement of it. The entry's spec and coefficients are its lowest seed's."""
-    same = (lambda a, b: _design(a) == _design(b)) if _trained_per_seed(new.lens) else (lambda a, b: a == b)
+    same = (lambda a, b: _design(a) == _design(b)) if co_designed(new.lens) else (lambda a, b: a == b)
     if old.profile_values != new.profile_values or not same(old.lens_spec, new.lens_spec):
         return new
-    versions = _trainer_versions(old), _trainer_versions(new)
+    versions = old.trainer_versions(), new.trainer_versions()
     if all(versions) and versions[0] != versions[1]:  # nets trained by another trainer: not the same thing
         return new
     old_specs, new_specs = _seed_specs(old), _seed_specs(new)

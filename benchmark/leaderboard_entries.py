@@ -144,6 +144,11 @@ class Entry:
     def failed(self) -> list[Row]:
         return [r for r in self.rows if not r.ok]
 
+    def trainer_versions(self, kinds: Sequence[str] = ("lens", "utility")) -> set[str | None]:
+        """The co-design trainer versions noted on the rows of `kinds` (None: not noted, i.e. rows
+        published before the note existed, or rows no trainer made)."""
+        return {row.notes.get("trainer_version") for row in self.rows if row.kind in kinds}
+
     def units(self, attack: str, seed: int) -> Units | None:
         """The per-unit outcomes of chain `attack` at `seed`, or None (no such ok row, or it has none)."""
         return next((r.units for r in self.rows if r.ok and r.attack == attack and r.seed == seed), None)
@@ -193,6 +198,12 @@ def _summarise(attack: str, rows: list[Row]) -> Chain:
     notes = {k: v for r in reversed(rows) for k, v in r.notes.items()}
     threat = next((r.threat_model for r in rows if r.threat_model), None)
     return Chain(attack, rows[0].kind, threat, tuple(r.seed for r in rows), metrics, notes, tuple(rows))
+
+
+def co_designed(lens: str) -> bool:
+    """Whether each seed of `lens` trains its own coefficients (a co-design scheme)."""
+    from benchmark.codesign.schemes import SCHEMES  # the schemes pull in torch: only when asked
+    return lens in SCHEMES
 
 
 def entry_name(lens: str, profile: str, scenes: str) -> str:

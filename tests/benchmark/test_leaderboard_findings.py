@@ -161,3 +161,46 @@ def test_missing_lenses_are_skipped():
     assert findings_table(_psnr_entries(4, 0.0)[:1]) == ""
     claims = {f.claim for f in findings.check_findings(_psnr_entries(4, 0.0))}
     assert claims == {PSNR_CLAIM}  # no utility or reader rows: only the PSNR claim applies
+
+
+def _noted(rows: list[Row], version: str | None) -> list[Row]:
+    for row in rows:
+        if version is not None:
+            row.notes["trainer_version"] = version
+    return rows
+
+
+def _lens_row(lens: str, seed: int) -> Row:
+    return Row(kind="lens", lens=lens, attack="lens", seed=seed, profile=PROFILE, scenes="synthetic", metrics={})
+
+
+def test_entries_of_different_trainer_versions_are_not_compared():
+    rng = np.random.default_rng(1)
+    union = rng.integers(0, 5000, size=(32, 19))
+    inter = (union * rng.uniform(0.3, 0.6, size=union.shape)).astype(int)
+    weak = (union * rng.uniform(0.1, 0.4, size=union.shape)).astype(int)
+    scenes = rng.normal(25.0, 4.0, size=64)
+
+    def entries(va, vb):
+        gp = _noted([_utility("gp", 0, inter, union), _lens_row("gp", 0),
+                     _restorer("gp", "wiener-known-psf", 0, scenes - 0.5)], va)
+        od = _noted([_utility("os-d-1000", 0, weak, union), _lens_row("os-d-1000", 0),
+                     _restorer("os-d-1000", "wiener-known-psf", 0, scenes)], vb)
+        return [_entry("gp", gp), _entry("os-d-1000", od)]
+
+    utility = "GP keeps more utility than lambda_deb = 1000"
+    for claim in (utility, PSNR_CLAIM):
+        assert _finding(entries("4", "4"), claim).label == stats.HOLDS
+        assert _finding(entries(None, None), claim).label == stats.HOLDS
+        mixed = _finding(entries("4", None), claim)
+        assert mixed.comparison is None and mixed.label == stats.CANNOT_TELL
+        assert "different co-design trainer versions (4 against not noted" in mixed.verdict
+
+
+def test_a_fixed_lens_privacy_does_not_depend_on_the_trainer_version():
+    scenes = np.random.default_rng(2).normal(25.0, 4.0, size=64)
+    defocus = _noted([_lens_row("defocus", 0), _restorer("defocus", "wiener-known-psf", 0, scenes - 0.5)], "4")
+    ideal = [_lens_row("ideal", 0), _restorer("ideal", "wiener-known-psf", 0, scenes)]
+    found = _finding([_entry("defocus", defocus), _entry("ideal", ideal)],
+                     "defocus lowers the attacker's PSNR against the ideal lens")
+    assert found.comparison is not None and found.label == stats.HOLDS
