@@ -19,6 +19,7 @@ import time
 from typing import Any, ClassVar
 
 import numpy as np
+import torch
 from torch import Tensor
 
 from attacks.base import FitContext, PlateRead, ReadHints, Reader, ThreatModel, box_iou
@@ -214,6 +215,35 @@ class Lpdr(PlateReaderBase):
     name: ClassVar[str] = "lpdr"
     vehicle_source: ClassVar[str] = "segmentation"
 
+    def __init__(self, vehicle_scale: float = 1.0, **options: Any) -> None:
+        """``vehicle_scale``: the images are segmented at this fraction of their size (area-averaged),
+        the label map brought back to full size (nearest), so the boxes are in full-size pixels;
+        plates are searched and read at full size whatever it is. See ``__init__`` of
+        ``PlateReaderBase`` for the other options."""
+        if not 0.0 < vehicle_scale <= 1.0:
+            raise ValueError(f"vehicle_scale must be in (0, 1], got {vehicle_scale}")
+        super().__init__(**options)
+        self.vehicle_scale = vehicle_scale
+
+    def describe(self) -> dict[str, Any]:
+        return {**super().describe(), "vehicle_scale": self.vehicle_scale}
+
+    def _segment(self, images: Tensor, segment: Any) -> Tensor:
+        """Train ids (B, H, W) of `images` (B, 3, H, W), segmented at ``vehicle_scale``."""
+        h, w = int(images.shape[2]), int(images.shape[3])
+        if self.vehicle_scale == 1.0:
+            small = images
+        else:
+            size = (max(1, round(h * self.vehicle_scale)), max(1, round(w * self.vehicle_scale)))
+            small = torch.nn.functional.interpolate(images, size=size, mode="area")
+        labels = segment(small)
+        if tuple(labels.shape) != (small.shape[0], *small.shape[2:]):
+            raise ValueError(f"hints.segment returned shape {tuple(labels.shape)}, expected (B, H, W) = "
+                             f"{(small.shape[0], *small.shape[2:])}")
+        if small is not images:
+            labels = torch.nn.functional.interpolate(labels[:, None].float(), size=(h, w), mode="nearest")[:, 0]
+        return labels.to(torch.int64)
+
     def skip_reason(self, ctx: FitContext) -> str | None:
         if ctx.extras.get("segmenter") is None:
             return ("lpdr finds vehicles with a segmentation network, and this context has none "
@@ -225,13 +255,10 @@ class Lpdr(PlateReaderBase):
             raise ValueError("lpdr needs ReadHints(segment=...) (a network mapping images to Cityscapes train "
                              "ids); got no segment callable. Use lpdr-oracle to read with ground-truth vehicles.")
         found = vehicles_memo(hints.segment)
-        keys = [content_key(im) for im in images]
+        keys = [f"{content_key(im)}@{self.vehicle_scale}" for im in images]
         if found is None or any(k not in found for k in keys):
             # The whole batch, as a reader without the cache would: the same segmentation, bit for bit.
-            labels = hints.segment(images)
-            if tuple(labels.shape) != (images.shape[0], *images.shape[2:]):
-                raise ValueError(f"hints.segment returned shape {tuple(labels.shape)}, expected (B, H, W) = "
-                                 f"{(images.shape[0], *images.shape[2:])}")
+            labels = self._segment(images, hints.segment)
             boxes = [segmentation_vehicles(m) for m in labels.detach().cpu().numpy()]
             if found is None:
                 return boxes

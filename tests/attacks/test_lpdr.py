@@ -124,3 +124,28 @@ def test_no_vehicle_and_border_vehicles_are_handled():
     for read in reads[1]:
         x0, y0, x1, y1 = read.box_xyxy
         assert 0 <= x0 < x1 <= 128 and 0 <= y0 < y1 <= 64
+
+
+def test_vehicle_scale_segments_a_smaller_image_and_returns_full_size_boxes():
+    images = torch.zeros(2, 3, 96, 160)
+    images[0, 1, 10:50, 20:91] = 1.0   # a "car" the colour segmenter below finds
+    images[1, 1, 41:96, 100:160] = 1.0
+    seen: list[tuple[int, ...]] = []
+
+    def segment(x: torch.Tensor) -> torch.Tensor:
+        seen.append(tuple(x.shape))
+        return torch.where(x[:, 1] > 0.5, 13, 0).to(torch.uint8)  # 13: car
+
+    full, half = Lpdr(min_vehicle_width_px=10_000), Lpdr(vehicle_scale=0.5, min_vehicle_width_px=10_000)
+    hints = attacks.ReadHints(segment=segment)
+    full.read(images, hints)
+    half.read(images, hints)
+    # Two segmentations (the memory of vehicles is per scale): full size, then half size.
+    assert seen == [(2, 3, 96, 160), (2, 3, 48, 80)]
+    assert [t.vehicles for t in full.last_trace] == [[(20, 10, 91, 50)], [(100, 41, 160, 96)]]
+    for a, b in zip(full.last_trace, half.last_trace):
+        (box_a,), (box_b,) = a.vehicles, b.vehicles
+        assert max(abs(p - q) for p, q in zip(box_a, box_b)) <= 1  # half-size pixels, in full-size units
+    assert half.describe()["vehicle_scale"] == 0.5
+    with pytest.raises(ValueError, match="vehicle_scale"):
+        Lpdr(vehicle_scale=0.0)
