@@ -91,7 +91,10 @@ def test_segmentation_reader_uses_the_segment_hint(large_plate_scenes):
     labels = torch.zeros(1, *sharp.shape[2:], dtype=torch.int64)
     labels[0, y0:y1, x0:x1] = torch.from_numpy(scenes[0].labels[y0:y1, x0:x1].astype(np.int64))
     reader = attacks.load("lpdr")
-    reads = reader.read(sharp[:1], attacks.ReadHints(segment=lambda x: labels))
+    def segment(x: torch.Tensor) -> torch.Tensor:  # the labels at the size asked for (lpdr's vehicle_scale)
+        return torch.nn.functional.interpolate(labels[:, None].float(), size=x.shape[2:], mode="nearest")[:, 0].long()
+
+    reads = reader.read(sharp[:1], attacks.ReadHints(segment=segment))
     assert reader.last_trace[0].vehicles  # components of the car / truck / bus labels
     # The large plate on that vehicle is found and read to within a character (the exact-read
     # accuracy of each detector is measured by the large-plate tests).
@@ -136,7 +139,7 @@ def test_vehicle_scale_segments_a_smaller_image_and_returns_full_size_boxes():
         seen.append(tuple(x.shape))
         return torch.where(x[:, 1] > 0.5, 13, 0).to(torch.uint8)  # 13: car
 
-    full, half = Lpdr(min_vehicle_width_px=10_000), Lpdr(vehicle_scale=0.5, min_vehicle_width_px=10_000)
+    full, half = Lpdr(vehicle_scale=1.0, min_vehicle_width_px=10_000), Lpdr(min_vehicle_width_px=10_000)
     hints = attacks.ReadHints(segment=segment)
     full.read(images, hints)
     half.read(images, hints)

@@ -26,6 +26,7 @@ class SceneLabels:
 
     def __init__(self, scenes) -> None:
         self.labels = {tuple(s.image[::7, ::7, 0].ravel()): torch.from_numpy(s.labels.astype(np.int64)) for s in scenes}
+        self.size = scenes[0].labels.shape
         self.images_seen = 0
 
     def __call__(self, images: torch.Tensor) -> torch.Tensor:
@@ -33,10 +34,13 @@ class SceneLabels:
         return torch.stack([self._labels(im) for im in images])
 
     def _labels(self, image: torch.Tensor) -> torch.Tensor:
-        # Restorers change pixels: find the scene by its nearest thumbnail.
-        thumb = image.permute(1, 2, 0).numpy()[::7, ::7, 0].ravel()
+        # Restorers change pixels: find the scene by its nearest thumbnail (at the scenes' size; lpdr
+        # may ask at another, its vehicle_scale), and answer at the size asked for.
+        full = torch.nn.functional.interpolate(image[None], size=self.size, mode="nearest")[0]
+        thumb = full.permute(1, 2, 0).numpy()[::7, ::7, 0].ravel()
         key = min(self.labels, key=lambda k: float(np.abs(np.asarray(k) - thumb).sum()))
-        return self.labels[key]
+        labels = self.labels[key][None, None].float()
+        return torch.nn.functional.interpolate(labels, size=image.shape[1:], mode="nearest")[0, 0].long()
 
 
 def _attack(cfg: RunConfig, scenes, sensor: torch.Tensor, same_segmenter: bool):
