@@ -276,8 +276,10 @@ def _lens_task(task: Task, cfg: RunConfig, staging: Path) -> TaskResult:
     t0 = time.perf_counter()
     sense(lens, sharp, cfg.profile.batch_size, task.seed, cfg.device)
     speed = sharp.shape[0] / (time.perf_counter() - t0)
+    with torch.no_grad():  # a co-designed lens's coefficients are parameters: no graph for a figure
+        energy = float(lens.psf_and_energy()[1].min())
     metrics = {"images_per_s": speed, "fit_s": fit_s, "psf_size_px": float(lens.geometry.psf_size_px),
-               "psf_energy": float(lens.psf_and_energy()[1].min())}
+               "psf_energy": energy}
     builder = _builder(cfg, task.lens, task.seed, lens)
     spec = lens.current_spec()
     facts, notes = training_facts(getattr(lens, "training_record", None))
