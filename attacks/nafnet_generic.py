@@ -5,7 +5,10 @@ the camera's sensor images. The paper used GoPro-pretrained weights, which canno
 downloaded here, so by default a stand-in is trained in-suite ONCE on generic degradations
 (``attacks.degradations``: identity, Gaussian, motion and disk kernels, random tint,
 Poisson-Gaussian noise, a generic Bayer pipeline) of sharp TRAIN crops. Its cache key holds the
-budget, the training crops and the seed but no lens, so every lens shares the same model.
+budget, the training crops and the seed but no lens, so every lens shares the same model. The package
+ships the model of the ``quick`` profile at seed 0 (``attacks/weights/``, ``attacks.shipped_weights``),
+made by this same training (``python -m benchmark pretrain-attacker nafnet-generic``): it is loaded
+when its key equals the run's, so a fresh machine does not spend the fit on it.
 
 Before deblurring, the tint is removed by gray-world white balance, as the paper corrects the
 white balance by hand; the training inputs get the same balance, so the network learns to
@@ -19,10 +22,12 @@ uses those weights instead of training; ``checkpoint_arch`` overrides the GoPro 
 from __future__ import annotations
 
 import hashlib
+import logging
 from pathlib import Path
 from typing import Any, ClassVar
 
 import torch
+from safetensors.torch import load as load_safetensors
 from torch import Tensor
 
 from attacks.base import FitContext, Restorer, ThreatModel
@@ -30,6 +35,7 @@ from attacks.degradations import degrade
 from attacks.gray_world import gray_world_balance
 from attacks.networks.nafnet import load_nafnet_checkpoint
 from attacks.onnx_backend import InferenceEngine, check_backend
+from attacks.shipped_weights import Shipped, find_shipped
 from attacks.restorer_training import (
     RestorerBudget,
     collect_pairs,
@@ -40,6 +46,8 @@ from attacks.restorer_training import (
 
 __all__ = ["NafnetGeneric"]
 
+log = logging.getLogger(__name__)
+
 
 class NafnetGeneric(Restorer):
     """Gray-world white balance, then a NAFNet trained on generic degradations (or a checkpoint).
@@ -48,10 +56,13 @@ class NafnetGeneric(Restorer):
         checkpoint: Path of a local NAFNet checkpoint to use instead of training; None trains.
         checkpoint_arch: ``NAFNet`` keyword arguments of the checkpoint (None: GoPro width 32).
         backend: Inference backend: "auto", "torch" or "onnx" (``attacks.onnx_backend``).
+        use_shipped: Load the package's shipped weights when their key matches (False: train or
+            load from the cache, as ``pretrain-attacker`` does to make them).
 
     Attributes:
-        trained: After ``fit``: True if it trained, False if the weights came from the cache
-            or the checkpoint.
+        trained: After ``fit``: True if it trained, False if the weights came from the cache,
+            the package or the checkpoint.
+        shipped: After ``fit``: the shipped weights used, or None.
         engine: After ``fit``: the inference engine.
     """
 
@@ -59,12 +70,14 @@ class NafnetGeneric(Restorer):
     threat_model: ClassVar[ThreatModel] = ThreatModel.SENSOR_ACCESS
 
     def __init__(self, checkpoint: str | Path | None = None, checkpoint_arch: dict[str, Any] | None = None,
-                 backend: str = "auto") -> None:
+                 backend: str = "auto", use_shipped: bool = True) -> None:
         self.checkpoint = None if checkpoint is None else Path(checkpoint)
         if self.checkpoint is not None and not self.checkpoint.is_file():
             raise FileNotFoundError(f"{self.name}: checkpoint {str(self.checkpoint)!r} does not exist")
         self.checkpoint_arch = dict(checkpoint_arch or {})
         self.backend = check_backend(backend)
+        self.use_shipped = use_shipped
+        self.shipped: Shipped | None = None
         self.budget: RestorerBudget | None = None
         self.trained: bool | None = None
         self.engine: InferenceEngine | None = None
@@ -83,15 +96,33 @@ class NafnetGeneric(Restorer):
                                  "FitContext.train_pairs (sharp TRAIN crops)")
             budget = RestorerBudget.from_profile(ctx.profile)
             _, sharp = collect_pairs(ctx.train_pairs, budget.max_train_images)
-            key = {"attack": self.name, "budget": budget.to_dict(), "data": fingerprint(sharp), "seed": ctx.seed}
+            key = self._key(budget, sharp, ctx.seed)
 
             def next_batch(generator: torch.Generator) -> tuple[Tensor, Tensor]:
                 (target,) = random_crops([sharp], budget.batch_size, budget.crop_px, generator)
                 return gray_world_balance(degrade(target, generator)), target
 
-            model, self.trained = fit_nafnet(budget, ctx, self.name, key, next_batch)
+            self.shipped = find_shipped(self.name, key) if self.use_shipped else None
+            if self.shipped is not None:
+                model = budget.build_nafnet()
+                model.load_state_dict(load_safetensors(self.shipped.data), strict=True)
+                self.trained = False
+                log.info("%s: weights shipped with the package (%s)", self.name, self.shipped.path.name)
+            else:
+                model, self.trained = fit_nafnet(budget, ctx, self.name, key, next_batch)
             self.budget = budget
         self.engine = InferenceEngine(model.to(ctx.device), self.backend)
+
+    def cache_key(self, ctx: FitContext) -> dict[str, Any]:
+        """The configuration its trained weights are cached (and shipped) under: budget, training crops, seed."""
+        if ctx.train_pairs is None:
+            raise ValueError(f"{self.name}: the cache key needs FitContext.train_pairs (sharp TRAIN crops)")
+        budget = RestorerBudget.from_profile(ctx.profile)
+        _, sharp = collect_pairs(ctx.train_pairs, budget.max_train_images)
+        return self._key(budget, sharp, ctx.seed)
+
+    def _key(self, budget: RestorerBudget, sharp: Tensor, seed: int) -> dict[str, Any]:
+        return {"attack": self.name, "budget": budget.to_dict(), "data": fingerprint(sharp), "seed": seed}
 
     def restore(self, sensor: Tensor) -> Tensor:
         """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""
@@ -108,4 +139,6 @@ class NafnetGeneric(Restorer):
         else:
             source = {"budget": None if self.budget is None else self.budget.to_dict(),
                       "training": "generic kernels (identity, gaussian, motion, disk), tint, poisson-gaussian"}
+            if self.shipped is not None:
+                source["shipped_weights"] = self.shipped.describe()
         return {**super().describe(), "backend": self.backend, "white_balance": "gray-world", **source}

@@ -93,6 +93,12 @@ def build_parser() -> argparse.ArgumentParser:
     pre.add_argument("--dir", type=Path, default=None,
                      help="leaderboard folder for the study and chart (default: the repository's)")
     pre.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
+    ship = sub.add_parser("pretrain-attacker", help="train (or load from the cache) a lens-independent attacker "
+                                                    "and ship its weights in the package with their provenance")
+    ship.add_argument("attacker", choices=["nafnet-generic"], help="the lens-independent attacker")
+    ship.add_argument("--profile", default="quick", choices=list(PROFILES), help="budget (default: quick)")
+    ship.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
+    ship.add_argument("--out", type=Path, default=None, help="weights folder (default: the package's attacks/weights)")
     sub.add_parser("list", help="list registered lenses, attackers and scene sets")
     rep = sub.add_parser("report", help="render leaderboard/README.md and charts from leaderboard/entries/")
     rep.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
@@ -273,6 +279,11 @@ def cmd_export_mask(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_pretrain_attacker(args: argparse.Namespace) -> int:
+    from benchmark.attack_weights import main as ship_main
+    return ship_main(args=args)
+
+
 def cmd_pretrain(args: argparse.Namespace) -> int:
     from benchmark.utility.pretrain import main as pretrain_main
     return pretrain_main(args=args)
@@ -286,7 +297,8 @@ def main(argv: list[str] | None = None) -> int:
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", force=True)
     commands = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "train": cmd_train, "study": cmd_study,
-                "export-mask": cmd_export_mask, "pretrain": cmd_pretrain}
+                "export-mask": cmd_export_mask, "pretrain": cmd_pretrain,
+                "pretrain-attacker": cmd_pretrain_attacker}
     try:
         return commands[args.command](*(() if args.command == "list" else (args,)))
     except (ValueError, LookupError, NotImplementedError, FileNotFoundError, DuplicateNameError) as exc:
