@@ -18,6 +18,8 @@ import cv2
 import numpy as np
 import torch
 
+from attacks.plates.ocr_onnx import feature_extractor
+
 __all__ = ["PLATE_ALPHABET", "OcrResult", "apply_format", "normalise", "padded_width", "prepare_crop", "read_plate",
            "read_plates", "recognize_rows", "one_thread", "SharedFeatures", "text_box"]
 
@@ -26,6 +28,10 @@ PLATE_ALPHABET = "ABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789"
 
 OCR_HEIGHT_PX = 64
 """Height the crop is upscaled to before reading: english_g2's input height."""
+
+FEATURE_BACKEND = "onnx"
+"""Where the recognizer's convolutions run by default: "onnx" (ONNX Runtime on the CPU, torch elsewhere or
+if the export fails; ``attacks.plates.ocr_onnx``) or "torch"."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -142,17 +148,19 @@ class SharedFeatures(torch.nn.Module):
     On the CPU EasyOCR quantizes the BiLSTM and the classifier dynamically: their activations are
     scaled by the min / max of the whole input, so a crop's output depends on the crops batched
     with it. The convolutions (most of the time) do not; running the quantized tail one crop at a
-    time keeps every crop's output bit-identical to reading it alone.
+    time keeps every crop's output bit-identical to reading it alone. ``backend`` "onnx" runs the
+    convolutions through ONNX Runtime (``attacks.plates.ocr_onnx``; equal to torch to float rounding).
     """
 
-    def __init__(self, model: Any) -> None:  # EasyOCR's Model: submodules named in _MODEL_PARTS
+    def __init__(self, model: Any, backend: str = "torch") -> None:  # EasyOCR's Model: parts in _MODEL_PARTS
         super().__init__()
         self.model = model
+        self.features = feature_extractor(model, backend)  # the convolutions; "onnx": ONNX Runtime (CPU)
 
     def forward(self, image: torch.Tensor, text: torch.Tensor | None = None) -> torch.Tensor:
         """(B, 1, 64, W) normalised crops -> (B, T, classes) per-column class scores; ``text`` is unused (CTC)."""
         m: Any = self.model
-        features = m.FeatureExtraction(image)
+        features = self.features(image)
         out = []
         with one_thread():
             for one in features.split(1):
@@ -186,7 +194,7 @@ def padded_width(row: np.ndarray, height_px: int = OCR_HEIGHT_PX) -> int:
     return math.ceil(max(max(w / h, h / w), 1.0)) * height_px
 
 
-def recognize_rows(ocr: Any, rows: dict[int, np.ndarray]) -> dict[int, tuple[str, float]]:
+def recognize_rows(ocr: Any, rows: dict[int, np.ndarray], backend: str | None = None) -> dict[int, tuple[str, float]]:
     """EasyOCR's english_g2 on prepared crops, one batch per padded width.
 
     Does what ``ocr.recognize(image, horizontal_list=[box], allowlist=PLATE_ALPHABET)`` does per crop
@@ -197,6 +205,7 @@ def recognize_rows(ocr: Any, rows: dict[int, np.ndarray]) -> dict[int, tuple[str
     Args:
         ocr: An ``easyocr.Reader``.
         rows: Key -> (h, w) uint8 single-channel crop (``prepare_crop``), h, w >= 1.
+        backend: Where the convolutions run, "onnx" or "torch" (None: ``FEATURE_BACKEND``).
 
     Returns:
         Key -> (raw string, confidence in [0, 1]) for every crop the recognizer returned a line for.
@@ -208,7 +217,7 @@ def recognize_rows(ocr: Any, rows: dict[int, np.ndarray]) -> dict[int, tuple[str
     recognizer: torch.nn.Module = ocr.recognizer
     batched = all(hasattr(getattr(recognizer, "module", recognizer), part) for part in _MODEL_PARTS)
     if batched:
-        recognizer = SharedFeatures(getattr(recognizer, "module", recognizer))
+        recognizer = SharedFeatures(getattr(recognizer, "module", recognizer), backend or FEATURE_BACKEND)
     ignore = "".join(sorted(set(ocr.character) - set(PLATE_ALPHABET)))
     groups: dict[int, list[int]] = {}
     for key, row in rows.items():

@@ -29,7 +29,9 @@ def _as_tuples(reads):
 
 @pytest.mark.parametrize("size,n", [((128, 256), 4), ((512, 1024), 3)], ids=["smoke", "quick"])
 def test_batched_reads_equal_reading_each_crop_alone(monkeypatch, size, n):
-    """Same strings, boxes and scores (bit for bit) as one image per pass and one recognizer pass per crop."""
+    """Same strings, boxes and scores (bit for bit) as one image per pass and one recognizer pass per crop
+    (both with the convolutions in torch, as EasyOCR runs them; ONNX Runtime's: tests/attacks/test_ocr_onnx.py)."""
+    monkeypatch.setattr(plate_ocr, "FEATURE_BACKEND", "torch")
     images, hints = _scenes(size, n)
     reader = attacks.load("lpdr-oracle")
     reader.fit(attacks.FitContext())
