@@ -39,9 +39,12 @@ ITERATION_LADDER: tuple[int, ...] = (1, 2, 3, 5, 8, 13, 20, 30, 50, 80)
 """Iteration counts tried by ``fit`` (roughly geometric: PSNR changes slowly in log k)."""
 
 _FIT_BATCHES = 2
-# Guards the ratio y / (H u) where the estimate has gone to ~0 (skimage adds 1e-12; a clamp also
-# catches the tiny negative values float FFTs produce).
-_EPS = 1e-12
+# Where the re-blurred estimate H u is below this many machine epsilons of the image's maximum, the
+# ratio y / (H u) is set to 0 (skimage's ``filter_epsilon``): below it H u is FFT rounding, not signal.
+# A fixed 1e-12 guard (skimage's default in float64) is not enough in float32: with a delta PSF
+# (``sensor-only``), padding values of ~1e-8 over rounding of ~1e-7 gave ratios of 1e4 that grew to
+# inf by iteration 8-9 (a 512 x 832 plate window of the quick run came back all NaN).
+_FLOOR_EPS = 16
 
 
 def richardson_lucy_iterates(y: Tensor, psf: Tensor | OtfCache, max_iterations: int, pad: bool = True
@@ -69,9 +72,11 @@ def richardson_lucy_iterates(y: Tensor, psf: Tensor | OtfCache, max_iterations: 
     if pad:
         data = edge_taper(F.pad(y, (left, right, top, bottom), mode="reflect"), otf, (top, left))
     estimate = torch.full_like(data, 0.5)
+    floor = _FLOOR_EPS * torch.finfo(data.dtype).eps * data.abs().amax(dim=(-3, -2, -1), keepdim=True)
+    zero = data.new_zeros(())
     for k in range(1, max_iterations + 1):
         reblurred = circular_filter(estimate, otf)
-        ratio = data / (reblurred.clamp_min(0.0) + _EPS)
+        ratio = torch.where(reblurred > floor, data / reblurred, zero)
         estimate = estimate * circular_filter(ratio, otf_conj)
         yield k, estimate[..., top : top + height, left : left + width]
 
