@@ -37,7 +37,7 @@ from benchmark.planning import Task
 
 __all__ = ["STAGES", "RunProfiler", "Stage", "cost_table", "profiled", "stage_table", "task_scope"]
 
-TOP_FUNCTIONS = 15
+TOP_FUNCTIONS = 30  # deep enough to show what a stage (e.g. OCR: conv, ONNX run, LSTM tail) spends
 
 
 @dataclass(frozen=True)
