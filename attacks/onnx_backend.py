@@ -112,7 +112,9 @@ class InferenceEngine:
             shape and thread count later in the process reuses those timings); on another device, or if the export fails, it uses torch
             (the reason is logged and kept in ``fallback_reason``).
             The first real batch, not a small probe, decides: on 2 cores the quick NAFNet ties
-            at 256 x 256 but ONNX Runtime is 1.8x faster at 512 x 1024.
+            at 256 x 256; at 512 x 1024 ONNX Runtime was once 1.8x faster, while in the quick runs of
+            2026-11-24 torch won (0.49-0.77 s against 0.66-0.83 s per image): which wins moves with
+            the versions and the machine, so it is timed, not assumed.
         export_hw: (H, W) of the example image the ONNX graph is traced with (axes are dynamic).
         exporter: Returns the ONNX bytes of ``model`` (e.g. from a cache, exporting on a miss);
             default ``export_onnx`` on an example of ``export_hw``.
