@@ -43,26 +43,29 @@ def check_backend(backend: str) -> str:
     return backend
 
 
-def export_onnx(model: nn.Module, example: Tensor) -> bytes:
+def export_onnx(model: nn.Module, example: Tensor,
+                axes: tuple[dict[int, str], dict[int, str]] | None = None) -> bytes:
     """Serialize ``model`` (image (B, C, H, W) -> map (B, C', H, W)) to ONNX with dynamic B, H, W.
 
     Args:
         model: A module in eval mode, on the CPU, whose output is one (B, C', H, W) tensor at the
             input's size (a restored image, or per-pixel logits).
         example: A CPU input of the right channel count used to trace the graph.
+        axes: The dynamic axes of the input and of the output, if not B, H and W of both.
 
     Returns:
         The ONNX model as bytes (opset 17), input "image", output "output".
     """
     buffer = io.BytesIO()
     dynamic = {0: "batch", 2: "height", 3: "width"}
+    axes_in, axes_out = axes if axes is not None else (dynamic, dynamic)
     with warnings.catch_warnings():
         # The TorchScript exporter is deprecated in favour of dynamo, which needs onnxscript.
         warnings.simplefilter("ignore")
         torch.onnx.export(
             model, (example,), buffer, dynamo=False, opset_version=_OPSET,
             input_names=["image"], output_names=["output"],
-            dynamic_axes={"image": dynamic, "output": dynamic},
+            dynamic_axes={"image": axes_in, "output": axes_out},
         )
     return buffer.getvalue()
 

@@ -14,15 +14,13 @@ If the export or ONNX Runtime fails, torch is used and the reason logged.
 
 from __future__ import annotations
 
-import io
 import logging
-import warnings
 from typing import Any
 
 import torch
 from torch import nn
 
-from attacks.onnx_backend import OnnxModel
+from attacks.onnx_backend import OnnxModel, export_onnx
 
 __all__ = ["feature_extractor"]
 
@@ -32,15 +30,9 @@ _SESSIONS: dict[int, tuple[nn.Module, OnnxModel | None]] = {}
 
 
 def _export(features: nn.Module) -> bytes:
-    buffer = io.BytesIO()
     axes_in = {0: "batch", 3: "width"}
     axes_out = {0: "batch", 3: "columns"}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the TorchScript exporter's deprecation notice
-        torch.onnx.export(features.eval(), (torch.rand(1, 1, 64, 256),), buffer, dynamo=False, opset_version=17,
-                          input_names=["image"], output_names=["output"],
-                          dynamic_axes={"image": axes_in, "output": axes_out})
-    return buffer.getvalue()
+    return export_onnx(features.eval(), torch.rand(1, 1, 64, 256), axes=(axes_in, axes_out))
 
 
 def feature_extractor(model: Any, backend: str = "onnx") -> Any:
