@@ -128,18 +128,29 @@ class Entry:
         return None if found is None else found.metrics.get(name)
 
     def worst_case(self, name: str, kind: str, attacks: set[str] | None = None) -> tuple[Stat, str] | None:
-        """The strongest attacker's figure: highest mean of `name` over the chains of one kind
-        ("restorer": restorers' PSNR/SSIM, "reader": readers and chains' plate accuracy), among
-        `attacks` when given; (stat, attack) or None. Ties go to the chain named first."""
-        best = None
-        for chain in self.chains():
-            if chain.kind not in ATTACKER_KINDS[kind] or name not in chain.metrics:
-                continue
-            if attacks is not None and chain.attack not in attacks:
-                continue
-            if best is None or chain.metrics[name].mean > best[0].mean:
-                best = (chain.metrics[name], chain.attack)
-        return best
+        """The strongest attacker's figure over all its seeds: (stat, attack) or None. Among the
+        chains of one kind ("restorer": restorers' PSNR/SSIM, "reader": readers and chains' plate
+        accuracy) that have `name` (and are in `attacks` when given), the strongest is the one with
+        the highest mean on the seeds every one of them has a value for, so that a chain run at
+        seed 0 only is ranked against the others' seed 0, never against their mean over seeds;
+        with no such seed, the highest mean. Ties go to the chain named first."""
+        found = [(chain.metrics[name], chain.attack, _seed_values(chain.seeds, chain.metrics[name]))
+                 for chain in self.chains()
+                 if chain.kind in ATTACKER_KINDS[kind] and name in chain.metrics
+                 and (attacks is None or chain.attack in attacks)]
+        if not found:
+            return None
+        shared = set.intersection(*(set(values) for _, _, values in found))
+
+        def rank(item: tuple[Stat, str, dict[int, float]]) -> float:
+            stat, _, values = item
+            return sum(values[s] for s in shared) / len(shared) if shared else stat.mean
+
+        best = found[0]
+        for item in found[1:]:
+            if rank(item) > rank(best):
+                best = item
+        return best[0], best[1]
 
     def failed(self) -> list[Row]:
         return [r for r in self.rows if not r.ok]
@@ -152,6 +163,11 @@ class Entry:
     def units(self, attack: str, seed: int) -> Units | None:
         """The per-unit outcomes of chain `attack` at `seed`, or None (no such ok row, or it has none)."""
         return next((r.units for r in self.rows if r.ok and r.attack == attack and r.seed == seed), None)
+
+
+def _seed_values(seeds: Sequence[int], stat: Stat) -> dict[int, float]:
+    """seed -> value of `stat` at that seed, for the seeds that have one."""
+    return {s: v for s, v in zip(seeds, stat.values) if v is not None}
 
 
 def _ids_key(ids: list[str]) -> str:

@@ -276,7 +276,7 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
         "<h1>Privacy Lens Bench leaderboard</h1>",
         "<p>Rendered by <code>python -m benchmark report</code> from <code>leaderboard/entries/*.json</code>; "
         "mean ± standard deviation over the seeds listed. Worst case = the strongest attacker of the suite for that "
-        "lens, or of the chosen threat model. Click a column header to sort.</p>",
+        "lens, or of the chosen threat model (ranked on the seeds every attacker ran). Click a column header to sort.</p>",
         f'<div class="filters">{filters}<span class="count" id="shown"></span></div>',
         "<h2>Utility against privacy</h2>", tradeoff_table(entries, study),
         "<h2>Ceiling violations</h2>", violations_html(violations),

@@ -21,7 +21,8 @@ log = logging.getLogger(__name__)
 
 INTRO = ("Rendered by `python -m benchmark report` from `leaderboard/entries/*.json` (written by "
          "`python -m benchmark run ... --publish`); never edited by hand. Mean ± standard deviation over the seeds "
-         "listed. Worst case = the strongest attacker of the suite for that lens; W_5% = the plate width below which "
+         "listed. Worst case = the strongest attacker of the suite for that lens (ranked on the seeds every attacker "
+         "ran, then shown over all of its seeds); W_5% = the plate width below which "
          "the attack-independent bound certifies that no attacker reads more than 5 % of plates: Fano = the Gaussian "
          "information bound (lenses.bound), ideal observer = the Bayesian ideal observer's ceiling "
          "(benchmark.observer, `studies/ideal_observer.json`, T = 1 and 30 frames), shown only where the study "

@@ -28,3 +28,16 @@ def test_a_worst_case_on_fewer_seeds_says_which():
 def test_a_worst_case_on_every_seed_is_plain():
     rows = [_row("wiener-known-psf", s, 25.0 + s) for s in (0, 1, 2)] + [_row("nafnet-known-pairs", 0, 20.0)]
     assert _worst_cell(rows) == "26.00 ± 1.00 (wiener-known-psf)"
+
+
+def test_the_strongest_is_chosen_on_the_seeds_both_ran():
+    # wiener beat nafnet at seed 0 (28 > 27), the only seed nafnet ran; its three-seed mean (25.33)
+    # is lower than nafnet's one value, which must not make nafnet the worst case.
+    rows = [_row("wiener-known-psf", s, v) for s, v in ((0, 28.0), (1, 24.0), (2, 24.0))]
+    rows.append(_row("nafnet-known-pairs", 0, 27.0))
+    assert _worst_cell(rows) == "25.33 ± 2.31 (wiener-known-psf)"
+
+
+def test_with_no_shared_seed_the_highest_mean_is_the_worst_case():
+    rows = [_row("wiener-known-psf", 1, 25.0), _row("nafnet-known-pairs", 0, 27.0)]
+    assert _worst_cell(rows).startswith("27.00 (nafnet-known-pairs")
