@@ -207,7 +207,7 @@ def _summarise(attack: str, rows: list[Row]) -> Chain:
     for name in names:
         values = [r.metric(name) for r in rows]
         valid = np.array([v for v in values if v is not None], dtype=float)
-        intervals = [r.interval(name) for r in rows if r.interval(name) is not None]
+        intervals = [i for r in rows if (i := r.interval(name)) is not None]
         interval = (min(i[0] for i in intervals), max(i[1] for i in intervals)) if intervals else None
         metrics[name] = Stat(float(valid.mean()), float(valid.std(ddof=1)) if len(valid) > 1 else 0.0,
                              tuple(values), interval)
