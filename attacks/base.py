@@ -254,3 +254,11 @@ class Reader(Attack):
         Returns:
             One list of ``PlateRead`` per image (empty when nothing was read), length B.
         """
+
+    def read_batches(self, batches: Iterable[tuple[Tensor, ReadHints | None]]) -> list[list[list[PlateRead]]]:
+        """``read`` of each (images, hints) batch, in order: one list of reads per image of each batch.
+
+        A reader may override it to share work across batches (``lpdr`` recognises the plate crops
+        of every batch together); the reads must be those ``read`` gives batch by batch.
+        """
+        return [self.read(images, hints) for images, hints in batches]

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Iterable
 from typing import Any, ClassVar
 
 import numpy as np
@@ -124,6 +125,37 @@ class PlateReaderBase(Reader):
 
         The plate crops of all images are recognised together (``read_plates`` batches them by size).
         """
+        return self.read_batches([(images, hints)])[0]
+
+    def read_batches(self, batches: Iterable[tuple[Tensor, ReadHints | None]]) -> list[list[list[PlateRead]]]:
+        """``read`` of each batch, with the plate crops of every batch recognised together: stages 1-2
+        run batch by batch, stage 3 once over all their crops, so crops of one padded width from
+        different batches share a forward pass. Each crop reads as it would alone
+        (``SharedFeatures``), so the reads equal those of ``read`` batch by batch. ``last_trace``
+        holds the traces of every image of every batch, in order."""
+        located = [self._locate(images, hints) for images, hints in batches]
+        t0 = time.perf_counter()
+        results = iter(self._recognise([c for _, crops in located for image_crops in crops for c in image_crops]))
+        self.stage_seconds["ocr"] += time.perf_counter() - t0
+        self.last_trace = []
+        out = []
+        for traces, _ in located:
+            for trace in traces:
+                candidates = []
+                for _, box in trace.plates:
+                    result = next(results)
+                    trace.raw_texts.append((result.raw, result.text, result.score))
+                    if len(result.text) >= self.min_chars:
+                        candidates.append(PlateRead(result.text, (float(box[0]), float(box[1]), float(box[2]),
+                                                                  float(box[3])), result.score))
+                trace.reads = _deduplicate(candidates)
+            self.last_trace.extend(traces)
+            out.append([trace.reads for trace in traces])
+        return out
+
+    def _locate(self, images: Tensor, hints: ReadHints | None) -> tuple[list[StageTrace], list[list[np.ndarray]]]:
+        """Stages 1-2 on a batch: each image's trace so far and its plate crops (copies, so that the
+        batch's pixels are not kept alive by them)."""
         if images.ndim != 4 or images.shape[1] != 3:
             raise ValueError(f"images must be (B, 3, H, W), got shape {tuple(images.shape)}")
         t0 = time.perf_counter()
@@ -134,22 +166,9 @@ class PlateReaderBase(Reader):
         for im, boxes in zip(rgb, vehicles):
             trace, image_crops = self._find_plates(np.ascontiguousarray(im), boxes)
             traces.append(trace)
-            crops.append(image_crops)
-        t0 = time.perf_counter()
-        results = iter(self._recognise([c for image_crops in crops for c in image_crops]))
-        self.stage_seconds["ocr"] += time.perf_counter() - t0
-        for trace in traces:
-            candidates = []
-            for _, box in trace.plates:
-                result = next(results)
-                trace.raw_texts.append((result.raw, result.text, result.score))
-                if len(result.text) >= self.min_chars:
-                    candidates.append(PlateRead(result.text, (float(box[0]), float(box[1]), float(box[2]),
-                                                              float(box[3])), result.score))
-            trace.reads = _deduplicate(candidates)
-        self.last_trace = traces
+            crops.append([c.copy() for c in image_crops])
         self.images_read += len(rgb)
-        return [trace.reads for trace in traces]
+        return traces, crops
 
     def _vehicles(self, images: Tensor, hints: ReadHints | None) -> list[list[Box]]:
         raise NotImplementedError

@@ -151,12 +151,24 @@ def read_plates(reader: attacks.Reader, images: torch.Tensor | Sequence[torch.Te
     all_reads: list[list[attacks.PlateRead]] = []
     stages_before = dict(getattr(reader, "stage_seconds", {}))
     t0 = time.perf_counter()
-    for start, batch in shape_batches(images, batch_size):
-        chunk = scenes[start:start + batch.shape[0]]
-        hints = attacks.ReadHints(vehicle_boxes=[[v.box_xyxy for v in s.vehicles] for s in chunk], segment=segment,
-                                  plate_boxes=[[p.box_xyxy for p in s.plates] for s in chunk])
-        with torch.no_grad():
-            reads = check_reads(reader.name, reader.read(batch.to(device), hints), len(chunk))
+    chunks: list[list[Scene]] = []
+
+    def inputs() -> Iterator[tuple[torch.Tensor, attacks.ReadHints]]:
+        for start, batch in shape_batches(images, batch_size):
+            chunk = scenes[start:start + batch.shape[0]]
+            chunks.append(chunk)
+            yield batch.to(device), attacks.ReadHints(
+                vehicle_boxes=[[v.box_xyxy for v in s.vehicles] for s in chunk], segment=segment,
+                plate_boxes=[[p.box_xyxy for p in s.plates] for s in chunk])
+
+    # One call for every batch: a reader may share work across them (lpdr recognises all crops together).
+    with torch.no_grad():
+        per_batch = reader.read_batches(inputs())
+    if not isinstance(per_batch, list) or len(per_batch) != len(chunks):
+        got = f"{len(per_batch)} batches" if isinstance(per_batch, list) else type(per_batch).__name__
+        raise OutputError(f"{reader.name}.read_batches returned {got} for {len(chunks)}; expected one list per batch")
+    for batch_reads, chunk in zip(per_batch, chunks):
+        reads = check_reads(reader.name, batch_reads, len(chunk))
         for r, scene in zip(reads, chunk):
             outcomes.extend(score_scene(r, scene))
         all_reads.extend(reads)

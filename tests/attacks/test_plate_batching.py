@@ -117,3 +117,48 @@ def test_lpdr_segments_each_image_once_per_segmenter():
     changed[1, :, 0, 0] += 0.5  # one pixel: another image; the batch is segmented whole again
     second.read(changed, attacks.ReadHints(segment=segment))
     assert segment.images_seen == 4
+
+
+def test_read_batches_pools_crops_and_reads_like_read_batch_by_batch():
+    """lpdr's read_batches recognises the crops of every batch together (fewer, fuller recognizer
+    passes) and returns exactly what read returns batch by batch, traces included, for batches of
+    different image sizes."""
+    big, big_hints = _scenes((512, 1024), 3)
+    small, small_hints = _scenes((256, 512), 2)
+    batches = [(big[:2], attacks.ReadHints(vehicle_boxes=big_hints.vehicle_boxes[:2])),
+               (small, small_hints),
+               (big[2:], attacks.ReadHints(vehicle_boxes=big_hints.vehicle_boxes[2:]))]
+    reader = attacks.load("lpdr-oracle")
+    reader.fit(attacks.FitContext())
+    calls: list[int] = []
+    real = attacks.lpdr.PlateReaderBase._recognise
+
+    def counting(self, crops):
+        calls.append(len(crops))
+        return real(self, crops)
+
+    with forgetting():
+        one_by_one, traces = [], []
+        for images, hints in batches:
+            one_by_one.append(reader.read(images, hints))
+            traces += [(t.plates, t.raw_texts) for t in reader.last_trace]
+    with forgetting(), pytest.MonkeyPatch.context() as mp:
+        mp.setattr(attacks.lpdr.PlateReaderBase, "_recognise", counting)
+        pooled = reader.read_batches(iter(batches))  # any iterable, consumed once
+    assert [_as_tuples(b) for b in pooled] == [_as_tuples(b) for b in one_by_one]
+    assert [(t.plates, t.raw_texts) for t in reader.last_trace] == traces
+    assert len(calls) == 1 and calls[0] == sum(len(p) for p, _ in traces) >= 5
+    assert sum(len(r) for b in pooled for r in b) >= 2  # the comparison covered real reads
+
+
+def test_the_default_read_batches_is_read_per_batch():
+    class Fixed(attacks.Reader):
+        name = "fixed-reads"
+        threat_model = attacks.ThreatModel.SENSOR_ACCESS
+
+        def read(self, images, hints=None):
+            return [[attacks.PlateRead(f"N{images.shape[-1]}", (0.0, 0.0, 1.0, 1.0), 1.0)] for _ in images]
+
+    reads = Fixed().read_batches([(torch.zeros(2, 3, 4, 5), None), (torch.zeros(1, 3, 4, 7), None)])
+    assert _as_tuples(reads[0]) == [[("N5", (0.0, 0.0, 1.0, 1.0), 1.0)]] * 2
+    assert _as_tuples(reads[1]) == [[("N7", (0.0, 0.0, 1.0, 1.0), 1.0)]]

@@ -7,7 +7,8 @@ import pytest
 import torch
 
 import attacks
-from benchmark.evaluation import OutputError, attempt, check_reads, check_restored, restoration_metrics
+from benchmark.evaluation import OutputError, attempt, check_reads, check_restored, read_plates, restoration_metrics
+from benchmark.scenes import load_scenes
 from benchmark.metrics import finite_mean
 from benchmark.schema import RowError
 
@@ -45,6 +46,32 @@ def test_bad_reader_outputs_are_refused(reads, text):
 def test_good_reads_pass():
     reads = [[], [attacks.PlateRead("AB12", (0.0, 0.0, 4.0, 2.0), 0.9)]]
     assert check_reads("echo", reads, 2) is reads
+
+
+class _BatchCount(attacks.Reader):
+    """Reads nothing; its read_batches drops the last batch when `drop` is set."""
+
+    name = "batch-count"
+    threat_model = attacks.ThreatModel.SENSOR_ACCESS
+
+    def __init__(self, drop: bool) -> None:
+        self.drop = drop
+
+    def read(self, images, hints=None):
+        return [[] for _ in images]
+
+    def read_batches(self, batches):
+        out = super().read_batches(batches)
+        return out[:-1] if self.drop else out
+
+
+def test_a_reader_is_given_every_batch_in_one_call_and_a_missing_batch_is_refused():
+    scenes = load_scenes("synthetic", "val", 3, (32, 64), 0)
+    images = torch.rand(3, 3, 32, 64)
+    outcomes, timing, reads = read_plates(_BatchCount(drop=False), images, scenes, 2, "cpu")
+    assert reads == [[], [], []] and timing["n_images"] == 3
+    with pytest.raises(OutputError, match=re.escape("batch-count.read_batches returned 1 batches for 2")):
+        read_plates(_BatchCount(drop=True), images, scenes, 2, "cpu")
 
 
 def test_an_exception_becomes_the_error_of_a_failed_row():
