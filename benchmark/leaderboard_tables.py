@@ -80,17 +80,22 @@ def _single(attack: str, name: str, fmt: str) -> Callable[[Entry, set[str] | Non
 
 def _bound_limited(e: Entry, attacks: set[str] | None) -> Cell:
     """"yes (seeds on a bound / seeds: terms)" when the trained mask ended on a coefficient bound in
-    any seed, "no" when it never did, "" for a lens that was not trained (no such metric)."""
+    any seed, "no" when it never did, "" for a lens that was not trained (no such metric). A term on
+    a bound in only some of those seeds says in how many ("Z3 tilt y in 1")."""
     chain = e.chain("lens")
     stat = None if chain is None else chain.metrics.get("bound_limited")
-    if stat is None:
+    if chain is None or stat is None:
         return "", None
     flags = [v for v in stat.values if v is not None]
-    hits = sum(1 for v in flags if v > 0)
-    if not hits:
+    hit_rows = [r for r in chain.rows if (r.metric("bound_limited") or 0) > 0]
+    if not hit_rows:
         return "no", 0.0
-    terms = chain.notes.get("bound_limited_terms", "") if chain is not None else ""
-    return f"yes ({hits}/{len(flags)} seeds{': ' + terms if terms else ''})", hits / len(flags)
+    counts: dict[str, int] = {}
+    for row in hit_rows:
+        for term in filter(None, (t.strip() for t in row.notes.get("bound_limited_terms", "").split(","))):
+            counts[term] = counts.get(term, 0) + 1
+    terms = ", ".join(t if n == len(hit_rows) else f"{t} in {n}" for t, n in counts.items())
+    return f"yes ({len(hit_rows)}/{len(flags)} seeds{': ' + terms if terms else ''})", len(hit_rows) / len(flags)
 
 
 MAIN_COLUMNS = (

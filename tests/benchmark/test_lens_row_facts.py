@@ -48,6 +48,15 @@ def test_leaderboard_marks_bound_limited_lenses():
     assert _cell(fixed) == ""
 
 
+def test_terms_on_a_bound_in_only_some_seeds_say_in_how_many():
+    rows = [_lens_row("os-d-mtadam", 0, 1.0, "Z2 tilt x"), _lens_row("os-d-mtadam", 1, 1.0, "Z3 tilt y"),
+            _lens_row("os-d-mtadam", 2, 0.0)]
+    assert _cell(make_entry("os-d-mtadam", rows, {"name": "quick"}, None, None)) == (
+        "yes (2/3 seeds: Z2 tilt x in 1, Z3 tilt y in 1)")
+    rows = [_lens_row("os-d-1000", 0, 1.0, "Z2, Z3, Z4"), _lens_row("os-d-1000", 1, 1.0, "Z2, Z4")]
+    assert _cell(make_entry("os-d-1000", rows, {"name": "quick"}, None, None)) == "yes (2/2 seeds: Z2, Z3 in 1, Z4)"
+
+
 def test_training_curves_are_found_where_the_trainer_puts_them(tmp_path):
     run = CoDesign(load_spec(START_SPEC), SCHEMES["gp"], get_profile("smoke"), 0, "cpu", tmp_path / "cache")
     run.directory.mkdir(parents=True)
