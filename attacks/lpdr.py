@@ -125,14 +125,20 @@ class PlateReaderBase(Reader):
 
         The plate crops of all images are recognised together (``read_plates`` batches them by size).
         """
-        return self.read_batches([(images, hints)])[0]
+        return self._read_pooled([(images, hints)])[0]
 
     def read_batches(self, batches: Iterable[tuple[Tensor, ReadHints | None]]) -> list[list[list[PlateRead]]]:
         """``read`` of each batch, with the plate crops of every batch recognised together: stages 1-2
         run batch by batch, stage 3 once over all their crops, so crops of one padded width from
         different batches share a forward pass. Each crop reads as it would alone
         (``SharedFeatures``), so the reads equal those of ``read`` batch by batch. ``last_trace``
-        holds the traces of every image of every batch, in order."""
+        holds the traces of every image of every batch, in order. A subclass that overrides ``read``
+        is read batch by batch through its own ``read``."""
+        if type(self).read is not PlateReaderBase.read:
+            return super().read_batches(batches)
+        return self._read_pooled(batches)
+
+    def _read_pooled(self, batches: Iterable[tuple[Tensor, ReadHints | None]]) -> list[list[list[PlateRead]]]:
         located = [self._locate(images, hints) for images, hints in batches]
         t0 = time.perf_counter()
         results = iter(self._recognise([c for _, crops in located for image_crops in crops for c in image_crops]))

@@ -162,3 +162,18 @@ def test_the_default_read_batches_is_read_per_batch():
     reads = Fixed().read_batches([(torch.zeros(2, 3, 4, 5), None), (torch.zeros(1, 3, 4, 7), None)])
     assert _as_tuples(reads[0]) == [[("N5", (0.0, 0.0, 1.0, 1.0), 1.0)]] * 2
     assert _as_tuples(reads[1]) == [[("N7", (0.0, 0.0, 1.0, 1.0), 1.0)]]
+
+
+def test_a_subclass_that_overrides_read_is_read_through_it():
+    class Shouting(attacks.lpdr.LpdrOracle):
+        name = "lpdr-oracle-shouting"
+
+        def read(self, images, hints=None):
+            return [[attacks.PlateRead(r.text + "!", r.box_xyxy, r.score) for r in per_image]
+                    for per_image in super().read(images, hints)]
+
+    images, hints = _scenes((512, 1024), 2)
+    reader = Shouting()
+    reader.fit(attacks.FitContext())
+    (reads,) = reader.read_batches([(images, hints)])
+    assert sum(map(len, reads)) >= 1 and all(r.text.endswith("!") for per_image in reads for r in per_image)
