@@ -162,8 +162,12 @@ def read_plates(reader: attacks.Reader, images: torch.Tensor | Sequence[torch.Te
                 plate_boxes=[[p.box_xyxy for p in s.plates] for s in chunk])
 
     # One call for every batch: a reader may share work across them (lpdr recognises all crops together).
+    batches = inputs()
     with torch.no_grad():
-        per_batch = reader.read_batches(inputs())
+        per_batch = reader.read_batches(batches)
+    if next(batches, None) is not None:  # a batch never read would silently drop its plates from the score
+        raise OutputError(f"{reader.name}.read_batches took {len(chunks) - 1} batch(es) and left the rest "
+                          "unread; it must read every batch it is given")
     if not isinstance(per_batch, list) or len(per_batch) != len(chunks):
         got = f"{len(per_batch)} batches" if isinstance(per_batch, list) else type(per_batch).__name__
         raise OutputError(f"{reader.name}.read_batches returned {got} for {len(chunks)}; expected one list per batch")

@@ -65,6 +65,13 @@ class _BatchCount(attacks.Reader):
         return out[:-1] if self.drop else out
 
 
+class _StopsEarly(_BatchCount):
+    """Reads only the first batch it is given, and returns one list for it."""
+
+    def read_batches(self, batches):
+        return [self.read(*next(iter(batches)))]
+
+
 def test_a_reader_is_given_every_batch_in_one_call_and_a_missing_batch_is_refused():
     scenes = load_scenes("synthetic", "val", 3, (32, 64), 0)
     images = torch.rand(3, 3, 32, 64)
@@ -72,6 +79,8 @@ def test_a_reader_is_given_every_batch_in_one_call_and_a_missing_batch_is_refuse
     assert reads == [[], [], []] and timing["n_images"] == 3
     with pytest.raises(OutputError, match=re.escape("batch-count.read_batches returned 1 batches for 2")):
         read_plates(_BatchCount(drop=True), images, scenes, 2, "cpu")
+    with pytest.raises(OutputError, match=re.escape("batch-count.read_batches took 1 batch(es) and left the rest unread")):
+        read_plates(_StopsEarly(drop=False), images, scenes, 2, "cpu")
 
 
 def test_an_exception_becomes_the_error_of_a_failed_row():
