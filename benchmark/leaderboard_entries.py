@@ -146,11 +146,8 @@ class Entry:
             stat, _, values = item
             return sum(values[s] for s in shared) / len(shared) if shared else stat.mean
 
-        best = found[0]
-        for item in found[1:]:
-            if rank(item) > rank(best):
-                best = item
-        return best[0], best[1]
+        stat, attack, _ = max(found, key=rank)  # the first of equal maxima: ties go to the chain named first
+        return stat, attack
 
     def failed(self) -> list[Row]:
         return [r for r in self.rows if not r.ok]
