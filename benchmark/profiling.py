@@ -6,8 +6,10 @@ loaded from the cache cost nothing and are not listed) and writes ``profile.json
 images/s (the profile's val scenes over the task's whole seconds, for tasks that process them),
 peak memory (the process's resident high-water mark from ``getrusage`` and how much the task
 raised it; the peak of Python / NumPy allocations from ``tracemalloc``; on CUDA torch's own
-``max_memory_allocated``), the pipeline stages (``STAGES``: inclusive cumulative seconds of the
-functions that implement them, their images/s from the call counts) and the top functions by
+``max_memory_allocated``; and, from ``benchmark.memory_sampler``, the sampled resident peak with our
+frames on the stack when it was set, so one sees which code holds the memory), the pipeline stages (``STAGES``: inclusive cumulative seconds of the
+functions that implement them, their images/s from the call counts, the highest resident memory
+sampled while they ran) and the top functions by
 cumulative time. Stages nest (a reader's ``read`` includes its segmentation), so their shares
 need not add up to 100 %. Under cProfile the Python-level code runs slower; the torch kernels,
 where the time goes, do not.
@@ -33,6 +35,7 @@ from typing import Any
 
 import torch
 
+from benchmark.memory_sampler import PeakSampler
 from benchmark.planning import Task
 
 __all__ = ["STAGES", "RunProfiler", "Stage", "cost_table", "profiled", "stage_table", "task_scope"]
@@ -104,10 +107,12 @@ class RunProfiler:
         tracemalloc.reset_peak()
         rss_before = _maxrss_mib()
         profile = cProfile.Profile()
+        sampler = PeakSampler({s.name: s.functions for s in STAGES})
         t0 = time.perf_counter()
         profile.enable()
         try:
-            yield
+            with sampler:
+                yield
         finally:
             profile.disable()
             seconds = time.perf_counter() - t0
@@ -120,9 +125,10 @@ class RunProfiler:
                 "rss_peak_mib": _maxrss_mib(), "rss_growth_mib": _maxrss_mib() - rss_before,
                 "python_peak_mib": traced_peak / 2**20,
                 **({"torch_cuda_peak_mib": torch.cuda.max_memory_allocated() / 2**20} if cuda else {}),
+                "rss_sampled": sampler.summary(),
             }
             stats = pstats.Stats(profile)
-            record["stages"] = _stages(stats, seconds, self.n_images)
+            record["stages"] = _stages(stats, seconds, self.n_images, sampler.group_peaks_mib)
             record["top_functions"] = _top_functions(stats, seconds)
             # A task that pushes the val scenes through a stage processes n_images scenes end to end.
             scenes = any(s["images"] for s in record["stages"])
@@ -146,7 +152,8 @@ def _where(func: tuple[str, int, str]) -> str:
     return f"{short}:{line}({name})"
 
 
-def _stages(stats: pstats.Stats, seconds: float, n_images: int) -> list[dict[str, Any]]:
+def _stages(stats: pstats.Stats, seconds: float, n_images: int,
+            peaks_mib: dict[str, float] | None = None) -> list[dict[str, Any]]:
     table = stats.stats  # type: ignore[attr-defined]  # {(file, line, name): (cc, nc, tt, ct, callers)}
     out = []
     for stage in STAGES:
@@ -158,7 +165,8 @@ def _stages(stats: pstats.Stats, seconds: float, n_images: int) -> list[dict[str
         if calls:
             images = calls * n_images if stage.per_call_images else 0
             out.append({"stage": stage.name, "seconds": cum, "share": cum / seconds if seconds > 0 else 0.0,
-                        "calls": calls, "images": images, "images_per_s": images / cum if images and cum > 0 else None})
+                        "calls": calls, "images": images, "images_per_s": images / cum if images and cum > 0 else None,
+                        "rss_peak_mib": (peaks_mib or {}).get(stage.name)})
     return out
 
 
@@ -269,10 +277,16 @@ def render_markdown(profile: dict[str, Any]) -> str:
                      f"peak {t['python_peak_mib']:.0f} MiB"
                      + (f", torch CUDA peak {t['torch_cuda_peak_mib']:.0f} MiB" if "torch_cuda_peak_mib" in t else "")
                      + (f", {t['images_per_s']:.2f} images/s" if t.get("images_per_s") else "") + ".\n")
+        sampled = t.get("rss_sampled") or {}
+        if sampled.get("peak_mib") is not None:
+            parts.append(f"Sampled resident peak {sampled['peak_mib']:.0f} MiB (from {sampled['start_mib']:.0f} at the "
+                         f"start; {sampled['samples']} samples, every {sampled['interval_s'] * 1000:.0f} ms), set in:\n\n"
+                         + "".join(f"    {frame}\n" for frame in sampled["peak_stack"]) + "\n")
         if t["stages"]:
-            parts.append("| stage | calls | seconds | share | images/s |\n|---|---:|---:|---:|---:|\n" + "".join(
+            parts.append("| stage | calls | seconds | share | images/s | sampled peak RSS MiB |\n"
+                         "|---|---:|---:|---:|---:|---:|\n" + "".join(
                 f"| {s['stage']} | {s['calls']} | {s['seconds']:.2f} | {s['share']:.1%} | "
-                f"{_fmt(s['images_per_s'], '.2f')} |\n" for s in t["stages"]))
+                f"{_fmt(s['images_per_s'], '.2f')} | {_fmt(s.get('rss_peak_mib'), '.0f')} |\n" for s in t["stages"]))
         parts.append("\n| function (cumulative) | calls | cumulative s | own s | share |\n|---|---:|---:|---:|---:|\n"
                      + "".join(f"| `{f['function']}` | {f['calls']} | {f['cumulative_s']:.2f} | {f['own_s']:.2f} | "
                                f"{f['share']:.1%} |\n" for f in t["top_functions"]))

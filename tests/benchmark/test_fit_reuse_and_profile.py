@@ -78,6 +78,12 @@ def test_the_profile_lists_every_computed_task_with_its_stages(two_runs):
     assert "restorer fit" not in {s["stage"] for s in fit["stages"]}  # loaded, not trained
     assert evaluate["top_functions"] and all(f["cumulative_s"] < evaluate["seconds"] for f in evaluate["top_functions"])
     assert evaluate["rss_peak_mib"] > 0 and evaluate["python_peak_mib"] > 0
+    sampled = evaluate["rss_sampled"]
+    if sampled["peak_mib"] is not None:  # Linux: the sampled peak, a lower bound on the high-water mark
+        assert sampled["samples"] > 0 and sampled["peak_mib"] <= evaluate["rss_peak_mib"] + 1
+        assert all(s["rss_peak_mib"] <= sampled["peak_mib"] for s in evaluate["stages"] if s["rss_peak_mib"])
+        assert stages["read plates"]["rss_peak_mib"] is not None
+        assert "Sampled resident peak" in (out / "profile.md").read_text()
     markdown = (out / "profile.md").read_text()
     assert profiling.cost_table(profile) in markdown and "| evaluate | defocus | 1 |" in markdown
     assert profiler.tasks == profile["tasks"]
