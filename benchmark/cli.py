@@ -122,7 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
     study = sub.add_parser("study", help="measure a modelling-choice study into leaderboard/studies/ and re-render")
     study.add_argument("name", choices=["psf-grid", "utility-size"],
                        help="psf-grid: PSF support, pupil grid, oversampling vs error and time; "
-                            "utility-size: SegFormer variants vs mIoU at one profile's budget")
+                            "utility-size: SegFormer variants, each trained to its plateau, vs mIoU")
     study.add_argument("--profile", default="quick", choices=list(PROFILES), help="utility-size's budget (default: quick)")
     study.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
     return parser

@@ -49,12 +49,16 @@ def scene_intervals(row: Row, per_image: Mapping[str, Sequence[float]], seed: in
 
 def utility_intervals(row: Row, per_scene_confusion: torch.Tensor) -> None:
     """Scene-bootstrap intervals of miou, mean_acc and overall_acc from (N, C, C) confusion matrices."""
-    parts = [c.double().numpy() for c in per_scene_confusion]
     for name in ("miou", "mean_acc", "overall_acc"):
-        if name in row.metrics and parts:
-            low, high = _pooled_bootstrap(parts, lambda conf, n=name: _score(conf, n),
-                                          row.seed)
-            row.set_interval(name, low, high, "bootstrap")
+        if name in row.metrics and len(per_scene_confusion):
+            row.set_interval(name, *pooled_score_interval(per_scene_confusion, name, row.seed), "bootstrap")
+
+
+def pooled_score_interval(per_scene_confusion: torch.Tensor, name: str, seed: int) -> tuple[float, float]:
+    """Scene-bootstrap 95 % interval of the pooled score ``name`` (miou, mean_acc or overall_acc) from
+    (N, C, C) per-scene confusion matrices: scenes resampled, their matrices summed, the score recomputed."""
+    parts = [c.double().numpy() for c in per_scene_confusion]
+    return _pooled_bootstrap(parts, lambda conf: _score(conf, name), seed)
 
 
 def _score(confusion: np.ndarray, name: str) -> float:

@@ -39,20 +39,45 @@ def psf_grid_figure(study: dict) -> Figure:
 
 
 def utility_size_figure(study: dict) -> Figure:
-    """mIoU against parameters (log), one point per SegFormer variant, annotated with its speed."""
+    """Three panels, one point (or line) per SegFormer variant, each trained to its plateau: mIoU against
+    parameters and against training seconds (95 % scene-bootstrap intervals as error bars, where the
+    study has them), and the learning curves."""
     records = sorted(study["records"], key=lambda r: r["params"])
-    fig = new_figure(figsize=(6, 4.2))
-    ax = fig.subplots()
-    ax.plot([r["params"] / 1e6 for r in records], [r["miou"] for r in records], "o-")
+    fig = new_figure(figsize=(15, 4.4))
+    by_params, by_time, curves = fig.subplots(1, 3)
+
+    def errors(r: dict) -> list[list[float]]:
+        low, high = r.get("intervals", {}).get("miou", (r["miou"], r["miou"]))
+        return [[r["miou"] - low], [high - r["miou"]]]
+
     for r in records:
-        ax.annotate(f"{r['variant']}\n{r['images_per_s']:.1f} img/s", (r["params"] / 1e6, r["miou"]),
-                    textcoords="offset points", xytext=(5, -14), fontsize=8)
-    ax.set_xscale("log")
-    ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
-    ax.set_xlabel("parameters (millions, log)")
-    ax.set_ylabel("mIoU on sharp val scenes")
+        label = r["variant"]
+        by_params.errorbar(r["params"] / 1e6, r["miou"], yerr=errors(r), fmt="o", capsize=3, label=label)
+        by_params.annotate(f"{label}\n{r['images_per_s']:.1f} img/s", (r["params"] / 1e6, r["miou"]),
+                           textcoords="offset points", xytext=(5, -14), fontsize=8)
+        by_time.errorbar(r["train_s"] / 60, r["miou"], yerr=errors(r), fmt="o", capsize=3, label=label)
+        by_time.annotate(label, (r["train_s"] / 60, r["miou"]), textcoords="offset points", xytext=(5, -10),
+                         fontsize=8)
+        if r.get("curve"):
+            plateau = r.get("plateau", {})
+            mark = "plateau" if plateau.get("reached") else "no plateau"
+            curves.plot([c["step"] for c in r["curve"]], [c["miou"] for c in r["curve"]], "o-", ms=3,
+                        label=f"{label} ({mark})")
+    for ax in (by_params, by_time):
+        ax.set_xscale("log")
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+        ax.set_ylabel("mIoU on sharp val scenes (95 % CI)")
+        ax.grid(alpha=0.3)
+    by_params.set_xlabel("parameters (millions, log)")
+    threads = sorted({r.get("train_threads") for r in records if r.get("train_threads")})
+    by_time.set_xlabel(f"training minutes (log; {','.join(map(str, threads)) or '?'} thread(s), load in the JSON)")
+    curves.set_xlabel("training step")
+    curves.set_ylabel("mIoU on the curve's val scenes")
+    curves.grid(alpha=0.3)
+    if any(r.get("curve") for r in records):
+        curves.legend(fontsize=8)
     profile = study.get("profile", {})
-    ax.set_title(f"Utility model size at one budget ({profile.get('name', '?')}: "
-                 f"{profile.get('pretrain_steps', '?')} steps, seed {study.get('seed', '?')})", fontsize=10)
-    ax.grid(alpha=0.3)
+    fig.suptitle(f"Utility model size, each trained to its plateau ({profile.get('name', '?')}: "
+                 f"{profile.get('pretrain_steps', '?')} steps, {profile.get('n_val', '?')} val scenes, "
+                 f"seed {study.get('seed', '?')})", fontsize=10)
     return fig

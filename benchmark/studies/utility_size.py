@@ -1,57 +1,93 @@
-"""Utility model size study: SegFormer variants trained on the same budget, scored on the same scenes.
+"""Utility model size study: SegFormer variants each trained to its plateau, scored on the same scenes.
 
-Each variant is pre-trained on sharp scenes exactly as a profile's clean utility net (same steps,
-crops, learning rate, seed; cached like it) and scored on the profile's sharp val scenes: mIoU,
-mean and overall accuracy, parameters, inference images/s and training seconds. It answers whether
-the suite's utility model is larger than the embedded scenes need at that budget.
+Each variant is pre-trained on sharp scenes exactly as a profile's clean utility net
+(:func:`benchmark.utility.pretrain.train`: the profile's ``pretrain_*`` recipe, its learning curve
+and plateau verdict; cached by the recipe's hash) and then scored by the runner's segmenter on the
+profile's sharp val scenes: mIoU, mean and overall accuracy with their scene-bootstrap 95 %
+intervals, per-class IoU, parameters, inference images/s, and the seconds training took (from the
+training record: pure training steps, threads and load average as measured when it ran). Every
+smaller variant is compared with the largest on the same scenes (paired scene bootstrap of the
+pooled mIoU): "the larger model segments better" holds, does not hold, or cannot be told at this
+sample size. That decides whether the suite's utility model is larger than the embedded scenes
+need, where every model has converged rather than at a fixed tiny budget.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import time
+import os
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import torch
 
+from benchmark import stats
 from benchmark.cache import atomic_write_text, cache_root
+from benchmark.intervals import pooled_score_interval
 from benchmark.profiles import Profile
 from benchmark.provenance import provenance
 from benchmark.run_config import RunConfig
+from benchmark.scenes import CLASS_NAMES, load_scenes
 from benchmark.sensing import to_tensor
-from benchmark.utility.measure import utility_metrics
-from benchmark.scenes import load_scenes
-from benchmark.utility.clean import clean_utility_net
+from benchmark.utility import pretrain
+from benchmark.utility.measure import utility_scores
+from benchmark.utility.scoring import scores
 
 VARIANTS = ("tiny", "b0-narrow", "b0")
+SCORES = ("miou", "mean_acc", "overall_acc")
+
+
+def _pooled_miou(strata: list[np.ndarray]) -> float:
+    return float(np.mean([scores(torch.from_numpy(s.sum(axis=0)))["miou"] for s in strata]))
 
 
 def measure(profile: Profile, variants: tuple[str, ...] = VARIANTS, seed: int = 0,
-            cache_dir: Path | None = None) -> list[dict]:
-    """One record per variant (see the module docstring); ``train_s`` is the wall time of getting the
-    trained net: training it, or a second or so when it was cached by an earlier run."""
+            cache_dir: Path | None = None, progress: bool = False) -> list[dict[str, Any]]:
+    """One record per variant (see the module docstring), in the order given; every variant but the
+    last carries ``vs_largest``, its paired comparison with the last variant."""
     cache_dir = Path(cache_dir or cache_root())
     scenes = load_scenes("synthetic", "val", profile.n_val, profile.image_size, seed)
     images = to_tensor(scenes)
-    records = []
+    records: list[dict[str, Any]] = []
+    confusions: list[np.ndarray] = []
     for variant in variants:
         p = dataclasses.replace(profile, utility_model=variant)
-        t0 = time.perf_counter()
-        net = clean_utility_net(p, seed, "cpu", cache_dir, progress=False)
-        train_s = time.perf_counter() - t0
+        net, trained = pretrain.train(p, seed, "cpu", cache_dir, progress=progress)
         cfg = RunConfig(lenses=[], attacks=[], scenes="synthetic", profile=p, seeds=[seed], cache_dir=cache_dir)
         with torch.no_grad():
-            m = utility_metrics(net, images, scenes, cfg)
-        records.append({"variant": variant, "params": sum(q.numel() for q in net.parameters()),
-                        "miou": m["miou"], "mean_acc": m["mean_acc"], "overall_acc": m["overall_acc"],
-                        "images_per_s": m["images_per_s"], "train_s": train_s})
+            metrics, per_scene = utility_scores(net, images, scenes, cfg)
+        confusions.append(per_scene.double().numpy())
+        timing = trained["timing"]
+        records.append({
+            "variant": variant, "params": sum(q.numel() for q in net.parameters()),
+            **{name: metrics[name] for name in SCORES},
+            "intervals": {name: list(pooled_score_interval(per_scene, name, seed)) for name in SCORES},
+            "class_iou": {name: metrics.get(f"iou_{name}") for name in CLASS_NAMES},
+            "images_per_s": metrics["images_per_s"],
+            "train_s": timing["train_s"], "seconds_per_step": timing["seconds_per_step"],
+            "train_threads": timing["threads"], "train_load_avg": timing["load_avg_1_5_15min_at_curve_points"],
+            "steps": trained["recipe"]["steps"], "plateau": trained["plateau"],
+            "curve": [{"step": c["step"], "miou": c["miou"], "elapsed_s": c["elapsed_s"]} for c in trained["curve"]],
+            "curve_val_scenes": trained["val"]["n_scenes"], "train_commit": trained["commit"],
+        })
+    largest = records[-1]["variant"]
+    for record, confusion in zip(records[:-1], confusions[:-1]):
+        comparison = stats.stratified_paired_bootstrap([confusions[-1]], [confusion], _pooled_miou, seed=seed)
+        record["vs_largest"] = {"claim": f"{largest} segments better than {record['variant']} (mIoU)",
+                                "verdict": stats.verdict(comparison, "greater").text,
+                                "difference": comparison.difference, "interval": [comparison.low, comparison.high],
+                                "p_value": comparison.p_value, "n_scenes": comparison.n}
     return records
 
 
-def run(path: Path, profile: Profile, seed: int = 0) -> Path:
-    """Measure and write the study JSON (records, profile and provenance) to ``path``."""
+def run(path: Path, profile: Profile, seed: int = 0, variants: tuple[str, ...] = VARIANTS,
+        progress: bool = True) -> Path:
+    """Measure and write the study JSON (records, profile, threads, load and provenance) to ``path``."""
+    records = measure(profile, variants, seed=seed, progress=progress)
     body = {"study": "utility_size", "profile": profile.to_dict(), "seed": seed,
-            "threads": torch.get_num_threads(), "records": measure(profile, seed=seed), "provenance": provenance("cpu")}
+            "threads": torch.get_num_threads(), "load_avg_at_end": list(os.getloadavg()),
+            "records": records, "provenance": provenance("cpu")}
     atomic_write_text(path, json.dumps(body, indent=1, sort_keys=True) + "\n")
     return path

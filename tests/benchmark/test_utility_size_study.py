@@ -1,14 +1,16 @@
 """The utility-size study trains each variant like the clean utility net and scores it like the runner."""
 
+import dataclasses
 import json
 
 from benchmark import leaderboard_report
 from benchmark.charts.profiles import utility_params
 from benchmark.profiles import get_profile
 from benchmark.studies import utility_size
+from benchmark.utility import pretrain
 
 
-def test_variants_are_measured_and_charted(tmp_path):
+def test_variants_are_trained_to_the_recipe_measured_compared_and_charted(tmp_path):
     profile = get_profile("smoke")
     records = utility_size.measure(profile, ("tiny", "b0-narrow"), cache_dir=tmp_path / "cache")
     assert [r["variant"] for r in records] == ["tiny", "b0-narrow"]
@@ -17,9 +19,37 @@ def test_variants_are_measured_and_charted(tmp_path):
         # IoU_c = TP / (TP + FP + FN) <= TP / (TP + FN) = accuracy_c, class by class.
         assert 0.0 <= r["miou"] <= r["mean_acc"] + 1e-12 <= 1.0 + 1e-12
         assert 0.0 <= r["overall_acc"] <= 1.0 and r["images_per_s"] > 0
-    # Cached like the runner's clean net: a second measurement loads the same weights.
+        for name in utility_size.SCORES:
+            low, high = r["intervals"][name]
+            assert low <= r[name] + 1e-12 and r[name] <= high + 1e-12
+        # Trained by the clean pre-training's own recipe: its whole learning curve and plateau verdict.
+        assert r["steps"] == profile.pretrain_steps and r["curve"][-1]["step"] == profile.pretrain_steps
+        assert set(r["plateau"]) >= {"reached", "gain_last_fifth"} and r["train_s"] > 0
+    # Only the smaller variant is compared with the largest, on the same scenes.
+    assert "vs_largest" not in records[-1]
+    versus = records[0]["vs_largest"]
+    assert versus["n_scenes"] == profile.n_val
+    assert versus["difference"] == records[1]["miou"] - records[0]["miou"]
+    assert versus["verdict"].split(":")[0] in ("holds", "does not hold", "cannot tell at this sample size")
+
+    # Cached like the clean net (the same recipe hash): a second measurement trains nothing and reports
+    # the seconds the training took when it ran, not the load time.
     again = utility_size.measure(profile, ("tiny",), cache_dir=tmp_path / "cache")
-    assert again[0]["miou"] == records[0]["miou"]
+    assert again[0]["miou"] == records[0]["miou"] and again[0]["train_s"] == records[0]["train_s"]
+    _, trained = pretrain.train(dataclasses.replace(profile, utility_model="tiny"), 0, "cpu",
+                                tmp_path / "cache", progress=False)
+    assert trained["timing"]["train_s"] == records[0]["train_s"]
+
+    (tmp_path / "entries").mkdir()
+    (tmp_path / "studies").mkdir()
+    (tmp_path / "studies" / "utility_size.json").write_text(json.dumps({"records": records, "profile": {}}))
+    assert tmp_path / "charts" / "utility_size.png" in leaderboard_report.render(tmp_path)
+
+
+def test_an_older_study_without_intervals_or_curves_still_charts(tmp_path):
+    """The study JSON published before the plateau rework (no intervals, no curves) renders."""
+    records = [{"variant": "tiny", "params": 245483, "miou": 0.09, "images_per_s": 0.3, "train_s": 187.0},
+               {"variant": "b0", "params": 3719027, "miou": 0.17, "images_per_s": 0.2, "train_s": 0.1}]
     (tmp_path / "entries").mkdir()
     (tmp_path / "studies").mkdir()
     (tmp_path / "studies" / "utility_size.json").write_text(json.dumps({"records": records, "profile": {}}))
