@@ -43,6 +43,18 @@ def _pooled_miou(strata: list[np.ndarray]) -> float:
     return float(np.mean([scores(torch.from_numpy(s.sum(axis=0)))["miou"] for s in strata]))
 
 
+def predicted_as(confusion: np.ndarray, top: int = 3) -> dict[str, dict[str, float]]:
+    """Per labelled class, the ``top`` classes its pixels were predicted as, with their fractions (where
+    a class's pixels go: what caps its IoU), from a pooled (C, C) confusion matrix (rows = truth)."""
+    out = {}
+    for i, name in enumerate(CLASS_NAMES):
+        total = confusion[i].sum()
+        if total > 0:
+            order = np.argsort(-confusion[i], kind="stable")[:top]
+            out[name] = {CLASS_NAMES[j]: float(confusion[i, j] / total) for j in order if confusion[i, j] > 0}
+    return out
+
+
 def measure(profile: Profile, variants: tuple[str, ...] = VARIANTS, seed: int = 0,
             cache_dir: Path | None = None, progress: bool = False) -> list[dict[str, Any]]:
     """One record per variant (see the module docstring), in the order given; every variant but the
@@ -65,6 +77,7 @@ def measure(profile: Profile, variants: tuple[str, ...] = VARIANTS, seed: int = 
             **{name: metrics[name] for name in SCORES},
             "intervals": {name: list(pooled_score_interval(per_scene, name, seed)) for name in SCORES},
             "class_iou": {name: metrics.get(f"iou_{name}") for name in CLASS_NAMES},
+            "predicted_as": predicted_as(per_scene.sum(dim=0).double().numpy()),
             "images_per_s": metrics["images_per_s"],
             "train_s": timing["train_s"], "seconds_per_step": timing["seconds_per_step"],
             "train_threads": timing["threads"], "train_load_avg": timing["load_avg_1_5_15min_at_curve_points"],

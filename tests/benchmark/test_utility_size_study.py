@@ -25,6 +25,8 @@ def test_variants_are_trained_to_the_recipe_measured_compared_and_charted(tmp_pa
         # Trained by the clean pre-training's own recipe: its whole learning curve and plateau verdict.
         assert r["steps"] == profile.pretrain_steps and r["curve"][-1]["step"] == profile.pretrain_steps
         assert set(r["plateau"]) >= {"reached", "gain_last_fifth"} and r["train_s"] > 0
+        for name, shares in r["predicted_as"].items():
+            assert 0.0 < sum(shares.values()) <= 1.0 + 1e-9 and list(shares.values()) == sorted(shares.values())[::-1]
     # Only the smaller variant is compared with the largest, on the same scenes.
     assert "vs_largest" not in records[-1]
     versus = records[0]["vs_largest"]
@@ -54,3 +56,11 @@ def test_an_older_study_without_intervals_or_curves_still_charts(tmp_path):
     (tmp_path / "studies").mkdir()
     (tmp_path / "studies" / "utility_size.json").write_text(json.dumps({"records": records, "profile": {}}))
     assert tmp_path / "charts" / "utility_size.png" in leaderboard_report.render(tmp_path)
+
+
+def test_predicted_as_reads_the_confusion_rows():
+    import numpy as np
+    confusion = np.zeros((19, 19))
+    confusion[13, 13], confusion[14, 13], confusion[14, 14], confusion[14, 0] = 10, 6, 3, 1  # truck: 6 car, 3 truck
+    shares = utility_size.predicted_as(confusion)
+    assert shares == {"car": {"car": 1.0}, "truck": {"car": 0.6, "truck": 0.3, "road": 0.1}}
