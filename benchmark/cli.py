@@ -124,6 +124,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="psf-grid: PSF support, pupil grid, oversampling vs error and time; "
                             "utility-size: SegFormer variants, each trained to its plateau, vs mIoU")
     study.add_argument("--profile", default="quick", choices=list(PROFILES), help="utility-size's budget (default: quick)")
+    study.add_argument("--variants", default=None, metavar="V1,V2,...",
+                       help="utility-size's SegFormer variants, smallest first, the suite's last (default: "
+                            "tiny,b0-narrow,b0); MODEL@PX trains MODEL on PX x PX crops, e.g. tiny@256")
     study.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
     return parser
 
@@ -243,7 +246,8 @@ def cmd_study(args: argparse.Namespace) -> int:
         scene = to_tensor([load_scene("synthetic", "val", 0, (256, 512), 0)])
         path = psf_grid.run(directory / "studies" / "psf_grid.json", scene)
     else:
-        path = utility_size.run(directory / "studies" / "utility_size.json", get_profile(args.profile))
+        variants = tuple(args.variants.split(",")) if args.variants else utility_size.VARIANTS
+        path = utility_size.run(directory / "studies" / "utility_size.json", get_profile(args.profile), variants=variants)
     print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
     for written in leaderboard_report.render(directory):
         print(f"wrote {written}")

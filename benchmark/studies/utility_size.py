@@ -10,6 +10,10 @@ smaller variant is compared with the largest on the same scenes (paired scene bo
 pooled mIoU): "the larger model segments better" holds, does not hold, or cannot be told at this
 sample size. That decides whether the suite's utility model is larger than the embedded scenes
 need, where every model has converged rather than at a fixed tiny budget.
+
+A variant may name its training crop, ``"tiny@256"`` (square, pixels): the same recipe with
+``pretrain_crop`` changed, compared with the same model at the profile's crop (the crop lever:
+does more context per crop lift the plateau?).
 """
 
 from __future__ import annotations
@@ -55,17 +59,40 @@ def predicted_as(confusion: np.ndarray, top: int = 3) -> dict[str, dict[str, flo
     return out
 
 
+def parse_variant(spec: str, profile: Profile) -> Profile:
+    """The profile a variant spec trains with: ``"b0"`` (the profile's crop) or ``"b0@256"`` (256 x 256 crops)."""
+    model, _, crop = spec.partition("@")
+    if not crop:
+        return dataclasses.replace(profile, utility_model=model)
+    if not crop.isdigit() or int(crop) < 1:
+        raise ValueError(f"utility-size variant {spec!r}: the crop after '@' must be a positive whole number of "
+                         f"pixels, e.g. {model}@256")
+    size = int(crop)
+    if size > min(profile.image_size):
+        raise ValueError(f"utility-size variant {spec!r}: crop {size} exceeds the scenes {tuple(profile.image_size)}")
+    return dataclasses.replace(profile, utility_model=model, pretrain_crop=(size, size))
+
+
+def _compare(better: np.ndarray, other: np.ndarray, claim: str, seed: int) -> dict[str, Any]:
+    comparison = stats.stratified_paired_bootstrap([better], [other], _pooled_miou, seed=seed)
+    return {"claim": claim, "verdict": stats.verdict(comparison, "greater").text,
+            "difference": comparison.difference, "interval": [comparison.low, comparison.high],
+            "p_value": comparison.p_value, "n_scenes": comparison.n}
+
+
 def measure(profile: Profile, variants: tuple[str, ...] = VARIANTS, seed: int = 0,
             cache_dir: Path | None = None, progress: bool = False) -> list[dict[str, Any]]:
-    """One record per variant (see the module docstring), in the order given; every variant but the
-    last carries ``vs_largest``, its paired comparison with the last variant."""
+    """One record per variant (see the module docstring), in the order given. Every record of the
+    profile's crop but the last carries ``vs_largest``, its paired comparison with the last such
+    variant; a record with its own crop carries ``vs_profile_crop``, its comparison with the same
+    model at the profile's crop, where that was measured too."""
     cache_dir = Path(cache_dir or cache_root())
     scenes = load_scenes("synthetic", "val", profile.n_val, profile.image_size, seed)
     images = to_tensor(scenes)
     records: list[dict[str, Any]] = []
     confusions: list[np.ndarray] = []
     for variant in variants:
-        p = dataclasses.replace(profile, utility_model=variant)
+        p = parse_variant(variant, profile)
         net, trained = pretrain.train(p, seed, "cpu", cache_dir, progress=progress)
         cfg = RunConfig(lenses=[], attacks=[], scenes="synthetic", profile=p, seeds=[seed], cache_dir=cache_dir)
         with torch.no_grad():
@@ -73,7 +100,8 @@ def measure(profile: Profile, variants: tuple[str, ...] = VARIANTS, seed: int = 
         confusions.append(per_scene.double().numpy())
         timing = trained["timing"]
         records.append({
-            "variant": variant, "params": sum(q.numel() for q in net.parameters()),
+            "variant": variant, "model": p.utility_model, "pretrain_crop": list(p.pretrain_crop),
+            "params": sum(q.numel() for q in net.parameters()),
             **{name: metrics[name] for name in SCORES},
             "intervals": {name: list(pooled_score_interval(per_scene, name, seed)) for name in SCORES},
             "class_iou": {name: metrics.get(f"iou_{name}") for name in CLASS_NAMES},
@@ -85,13 +113,18 @@ def measure(profile: Profile, variants: tuple[str, ...] = VARIANTS, seed: int = 
             "curve": [{"step": c["step"], "miou": c["miou"], "elapsed_s": c["elapsed_s"]} for c in trained["curve"]],
             "curve_val_scenes": trained["val"]["n_scenes"], "train_commit": trained["commit"],
         })
-    largest = records[-1]["variant"]
-    for record, confusion in zip(records[:-1], confusions[:-1]):
-        comparison = stats.stratified_paired_bootstrap([confusions[-1]], [confusion], _pooled_miou, seed=seed)
-        record["vs_largest"] = {"claim": f"{largest} segments better than {record['variant']} (mIoU)",
-                                "verdict": stats.verdict(comparison, "greater").text,
-                                "difference": comparison.difference, "interval": [comparison.low, comparison.high],
-                                "p_value": comparison.p_value, "n_scenes": comparison.n}
+    at_profile_crop = [i for i, v in enumerate(variants) if "@" not in v]
+    if at_profile_crop:
+        last = at_profile_crop[-1]
+        for i in at_profile_crop[:-1]:
+            records[i]["vs_largest"] = _compare(confusions[last], confusions[i], f"{variants[last]} segments better "
+                                                f"than {variants[i]} (mIoU)", seed)
+    for i, variant in enumerate(variants):
+        model = variant.partition("@")[0]
+        if "@" in variant and model in variants:
+            j = variants.index(model)
+            records[i]["vs_profile_crop"] = _compare(confusions[i], confusions[j], f"{variant} segments better than "
+                                                     f"{model} at the profile's crop (mIoU)", seed)
     return records
 
 

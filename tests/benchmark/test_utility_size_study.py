@@ -3,6 +3,8 @@
 import dataclasses
 import json
 
+import pytest
+
 from benchmark import leaderboard_report
 from benchmark.charts.profiles import utility_params
 from benchmark.profiles import get_profile
@@ -64,3 +66,17 @@ def test_predicted_as_reads_the_confusion_rows():
     confusion[13, 13], confusion[14, 13], confusion[14, 14], confusion[14, 0] = 10, 6, 3, 1  # truck: 6 car, 3 truck
     shares = utility_size.predicted_as(confusion)
     assert shares == {"car": {"car": 1.0}, "truck": {"car": 0.6, "truck": 0.3, "road": 0.1}}
+
+
+def test_a_variant_may_name_its_crop_and_is_compared_with_the_profile_crop(tmp_path):
+    profile = get_profile("smoke")
+    assert utility_size.parse_variant("tiny@32", profile).pretrain_crop == (32, 32)
+    assert utility_size.parse_variant("tiny", profile).pretrain_crop == profile.pretrain_crop
+    for bad in ("tiny@x", "tiny@0", "tiny@4096"):
+        with pytest.raises(ValueError, match="utility-size variant"):
+            utility_size.parse_variant(bad, profile)
+    records = utility_size.measure(profile, ("tiny", "tiny@32"), cache_dir=tmp_path / "cache")
+    assert records[1]["pretrain_crop"] == [32, 32] and records[1]["model"] == "tiny"
+    assert records[1]["params"] == records[0]["params"] and "vs_largest" not in records[0]
+    versus = records[1]["vs_profile_crop"]
+    assert versus["difference"] == records[1]["miou"] - records[0]["miou"]
