@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +36,7 @@ from benchmark.provenance import provenance
 from benchmark.run_config import RunConfig
 from benchmark.scenes import CLASS_NAMES, load_scenes
 from benchmark.sensing import to_tensor
-from benchmark.utility import pretrain
+from benchmark.utility import clean, pretrain
 from benchmark.utility.measure import utility_scores
 from benchmark.utility.scoring import scores
 
@@ -43,7 +44,7 @@ VARIANTS = ("tiny", "b0-narrow", "b0")
 SCORES = ("miou", "mean_acc", "overall_acc")
 
 
-def _pooled_miou(strata: list[np.ndarray]) -> float:
+def _pooled_miou(strata: Sequence[np.ndarray]) -> float:
     return float(np.mean([scores(torch.from_numpy(s.sum(axis=0)))["miou"] for s in strata]))
 
 
@@ -80,6 +81,25 @@ def _compare(better: np.ndarray, other: np.ndarray, claim: str, seed: int) -> di
             "p_value": comparison.p_value, "n_scenes": comparison.n}
 
 
+def _shipped_check(net: torch.nn.Module, images: torch.Tensor, scenes: list, cfg: RunConfig, profile: Profile,
+                   seed: int) -> dict[str, Any] | None:
+    """The package's shipped clean weights for ``profile`` (made by the same recipe), scored on the same
+    scenes, and how far the weights just trained lie from them (largest absolute difference after
+    rounding to the shipped float16): whether the shipped file is reproduced by its recipe here."""
+    path = clean.shipped_for(profile)
+    if path is None:
+        return None
+    shipped = clean.load_verified(path, profile.utility_model)
+    with torch.no_grad():
+        metrics, per_scene = utility_scores(shipped, images, scenes, cfg)
+    ours = dict(net.state_dict())
+    difference = max(float((ours[k].half().float() - v).abs().max()) for k, v in shipped.state_dict().items()
+                     if v.is_floating_point())
+    return {"file": path.name, "miou": metrics["miou"],
+            "miou_interval": list(pooled_score_interval(per_scene, "miou", seed)),
+            "max_abs_weight_difference": difference}
+
+
 def measure(profile: Profile, variants: tuple[str, ...] = VARIANTS, seed: int = 0,
             cache_dir: Path | None = None, progress: bool = False) -> list[dict[str, Any]]:
     """One record per variant (see the module docstring), in the order given. Every record of the
@@ -113,6 +133,8 @@ def measure(profile: Profile, variants: tuple[str, ...] = VARIANTS, seed: int = 
             "curve": [{"step": c["step"], "miou": c["miou"], "elapsed_s": c["elapsed_s"]} for c in trained["curve"]],
             "curve_val_scenes": trained["val"]["n_scenes"], "train_commit": trained["commit"],
         })
+        if "@" not in variant and variant == profile.utility_model:
+            records[-1]["shipped"] = _shipped_check(net, images, scenes, cfg, p, seed)
     at_profile_crop = [i for i, v in enumerate(variants) if "@" not in v]
     if at_profile_crop:
         last = at_profile_crop[-1]

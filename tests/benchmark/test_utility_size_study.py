@@ -80,3 +80,17 @@ def test_a_variant_may_name_its_crop_and_is_compared_with_the_profile_crop(tmp_p
     assert records[1]["params"] == records[0]["params"] and "vs_largest" not in records[0]
     versus = records[1]["vs_profile_crop"]
     assert versus["difference"] == records[1]["miou"] - records[0]["miou"]
+
+
+def test_the_profile_model_is_checked_against_the_shipped_weights_it_reproduces(tmp_path, monkeypatch):
+    """Shipped weights exported from the very net the study trains: zero weight difference, the same
+    mIoU up to float16 rounding; another variant gets no such check."""
+    profile = get_profile("smoke")
+    net, record = pretrain.train(profile, 0, "cpu", tmp_path / "cache", progress=False)
+    weights, _ = pretrain.export(net, record, profile, tmp_path / "weights")
+    monkeypatch.setattr(utility_size.clean, "shipped_for", lambda p, scene_set="synthetic": weights)
+    records = utility_size.measure(profile, ("b0-narrow", profile.utility_model), cache_dir=tmp_path / "cache")
+    assert "shipped" not in records[0]
+    shipped = records[1]["shipped"]
+    assert shipped["file"] == weights.name and shipped["max_abs_weight_difference"] == 0.0
+    assert abs(shipped["miou"] - records[1]["miou"]) < 0.02
