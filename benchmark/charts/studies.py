@@ -66,6 +66,7 @@ def utility_size_figure(study: dict) -> Figure:
     for ax in (by_params, by_time):
         ax.set_xscale("log")
         ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_ylabel("mIoU on sharp val scenes (95 % CI)")
         ax.grid(alpha=0.3)
     by_params.set_xlabel("parameters (millions, log)")
