@@ -81,11 +81,26 @@ def check_reads(name: str, reads: object, n_images: int) -> list[list[attacks.Pl
     return reads
 
 
+# Whole frames go to a restorer a few at a time: a network's activations grow with the pixels of its
+# batch. RED10 (width 32) on 512 x 1024 frames raised the resident peak by 2.2 GiB in batches of 8,
+# 0.6 GiB in batches of 2 and 0.3 GiB one by one, at the same speed (2.9, 2.8, 2.7 s for 8 frames, 2
+# threads; 2026-11-26); in a quick run it set the process's peak (12.0 GiB). Plate windows (>= 256 x 256)
+# stay in batches of the profile's size.
+RESTORE_PIXELS_PER_BATCH = 2 * 512 * 1024
+
+
+def frames_per_batch(images: torch.Tensor, batch_size: int) -> int:
+    """How many of ``images`` (N,3,H,W) one restore call takes: ``batch_size``, fewer where that would pass
+    ``RESTORE_PIXELS_PER_BATCH`` pixels, at least one."""
+    return max(1, min(batch_size, RESTORE_PIXELS_PER_BATCH // (int(images.shape[-2]) * int(images.shape[-1]))))
+
+
 def restore_all(attacker: attacks.Restorer, sensor: torch.Tensor, batch_size: int, device: str) -> torch.Tensor:
-    """The attacker's restorations of every sensor image (N,3,H,W), checked, on the CPU."""
+    """The attacker's restorations of every sensor image (N,3,H,W), checked, on the CPU, at most
+    ``batch_size`` images (and ``RESTORE_PIXELS_PER_BATCH`` pixels) per call."""
     outs = []
     with torch.no_grad():
-        for b in batches(sensor, batch_size):
+        for b in batches(sensor, frames_per_batch(sensor, batch_size)):
             outs.append(check_restored(attacker.name, attacker.restore(b.to(device)), b.to(device)).cpu())
     return torch.cat(outs)
 

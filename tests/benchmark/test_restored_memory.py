@@ -57,3 +57,29 @@ def test_restoration_metrics_score_in_chunks_with_the_one_batch_values(monkeypat
     torch.testing.assert_close(torch.tensor(per_image["psnr_db"], dtype=torch.float64), psnr(restored, sharp).double(),
                                rtol=0, atol=1e-9)
     assert metrics["n_images"] == 19.0
+
+
+class _Recording(attacks.Restorer):
+    name = "recording"
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.batches: list[int] = []
+
+    def restore(self, sensor: torch.Tensor) -> torch.Tensor:
+        self.batches.append(sensor.shape[0])
+        return sensor.flip(-1)
+
+
+def test_whole_frames_are_restored_a_pixel_budget_at_a_time_in_order():
+    """Quick frames (512 x 1024) go two per call whatever the profile's batch; small frames keep it;
+    the restorations come back complete and in order."""
+    from benchmark.evaluation import RESTORE_PIXELS_PER_BATCH, frames_per_batch, restore_all
+    big = torch.rand(5, 3, 512, 1024, generator=torch.Generator().manual_seed(0))
+    assert frames_per_batch(big, 8) == RESTORE_PIXELS_PER_BATCH // (512 * 1024) == 2
+    assert frames_per_batch(torch.rand(5, 3, 128, 256), 4) == 4
+    assert frames_per_batch(torch.rand(1, 3, 2048, 4096), 8) == 1
+    restorer = _Recording()
+    out = restore_all(restorer, big, 8, "cpu")
+    assert restorer.batches == [2, 2, 1]
+    torch.testing.assert_close(out, big.flip(-1), rtol=0, atol=0)
