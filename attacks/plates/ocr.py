@@ -147,8 +147,9 @@ class SharedFeatures(torch.nn.Module):
 
     On the CPU EasyOCR quantizes the BiLSTM and the classifier dynamically: their activations are
     scaled by the min / max of the whole input, so a crop's output depends on the crops batched
-    with it. The convolutions (most of the time) do not; running the quantized tail one crop at a
-    time keeps every crop's output bit-identical to reading it alone. ``backend`` "onnx" runs the
+    with it. The convolutions (most of the time) do not, up to float rounding (none on some CPUs,
+    ~3e-6 of the features' scale on one with AVX2 and no AVX-512); running the quantized tail one crop
+    at a time keeps every crop's output what it is when read alone. ``backend`` "onnx" runs the
     convolutions through ONNX Runtime (``attacks.plates.ocr_onnx``; equal to torch to float rounding).
     """
 
