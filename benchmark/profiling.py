@@ -5,7 +5,9 @@ loaded from the cache cost nothing and are not listed) and writes ``profile.json
 ``profile.md`` into the run folder. Per task: wall seconds, share of the profiled time,
 images/s (the profile's val scenes over the task's whole seconds, for tasks that process them),
 peak memory (the process's resident high-water mark from ``getrusage`` and how much the task
-raised it; the peak of Python / NumPy allocations from ``tracemalloc``; on CUDA torch's own
+raised it; with ``trace_python`` (``--profile-python-memory``) the peak of Python / NumPy allocations
+from ``tracemalloc``, off by default because it traces every allocation: it slowed a quick co-design
+step from 1.40 to 1.87 s, where cProfile and the sampler together cost 1.31 -> 1.40 s; on CUDA torch's own
 ``max_memory_allocated``; and, from ``benchmark.memory_sampler``, the sampled resident peak with our
 frames on the stack when it was set, so one sees which code holds the memory), the pipeline stages (``STAGES``: inclusive cumulative seconds of the
 functions that implement them, their images/s from the call counts, the highest resident memory
@@ -87,11 +89,13 @@ class RunProfiler:
     Args:
         n_images: Val scenes per task (the profile's ``n_val``): images/s of the stages that process them.
         device: The run's device; on CUDA the task records torch's peak allocated memory too.
+        trace_python: Also record the peak of Python / NumPy allocations (tracemalloc; slow).
     """
 
-    def __init__(self, n_images: int, device: str = "cpu") -> None:
+    def __init__(self, n_images: int, device: str = "cpu", trace_python: bool = False) -> None:
         self.n_images = n_images
         self.device = device
+        self.trace_python = trace_python
         self.tasks: list[dict[str, Any]] = []
         self.started = time.perf_counter()
 
@@ -101,10 +105,11 @@ class RunProfiler:
         cuda = self.device.startswith("cuda") and torch.cuda.is_available()
         if cuda:
             torch.cuda.reset_peak_memory_stats()
-        traced_here = not tracemalloc.is_tracing()
+        traced_here = self.trace_python and not tracemalloc.is_tracing()
         if traced_here:
             tracemalloc.start()
-        tracemalloc.reset_peak()
+        if self.trace_python:
+            tracemalloc.reset_peak()
         rss_before = _maxrss_mib()
         profile = cProfile.Profile()
         sampler = PeakSampler({s.name: s.functions for s in STAGES})
@@ -116,14 +121,14 @@ class RunProfiler:
         finally:
             profile.disable()
             seconds = time.perf_counter() - t0
-            traced_peak = tracemalloc.get_traced_memory()[1]
+            traced_peak = tracemalloc.get_traced_memory()[1] if self.trace_python else None
             if traced_here:
                 tracemalloc.stop()
             record: dict[str, Any] = {
                 "key": task.key, "kind": task.kind, "label": _label(task), "lens": task.lens, "seed": task.seed,
                 "seconds": seconds,
                 "rss_peak_mib": _maxrss_mib(), "rss_growth_mib": _maxrss_mib() - rss_before,
-                "python_peak_mib": traced_peak / 2**20,
+                "python_peak_mib": None if traced_peak is None else traced_peak / 2**20,
                 **({"torch_cuda_peak_mib": torch.cuda.max_memory_allocated() / 2**20} if cuda else {}),
                 "rss_sampled": sampler.summary(),
             }
@@ -202,7 +207,8 @@ def _label(task: Task) -> str:
 
 
 @contextlib.contextmanager
-def profiled(out: Path, n_images: int, device: str = "cpu", executor: str = "local") -> Iterator[RunProfiler]:
+def profiled(out: Path, n_images: int, device: str = "cpu", executor: str = "local",
+             trace_python: bool = False) -> Iterator[RunProfiler]:
     """Profile every task computed inside the block; then write ``out``/profile.json and profile.md.
 
     Raises:
@@ -213,7 +219,7 @@ def profiled(out: Path, n_images: int, device: str = "cpu", executor: str = "loc
         raise ValueError(f"--profile-time profiles tasks in this process; use --executor local, not {executor!r}")
     if _ACTIVE is not None:
         raise RuntimeError("a run profiler is already active in this process")
-    _ACTIVE = RunProfiler(n_images, device)
+    _ACTIVE = RunProfiler(n_images, device, trace_python)
     try:
         yield _ACTIVE
     finally:
@@ -273,8 +279,9 @@ def render_markdown(profile: dict[str, Any]) -> str:
     parts = ["# Where the time went\n", "## Tasks\n", cost_table(profile), "## Stages\n", stage_table(profile)]
     for t in sorted(profile["tasks"], key=lambda t: -t["seconds"]):
         parts.append(f"## {t['key']} ({t['seconds']:.1f} s, {t['share']:.1%})\n")
-        parts.append(f"Peak RSS {t['rss_peak_mib']:.0f} MiB (+{t['rss_growth_mib']:.0f} in this task), Python/NumPy "
-                     f"peak {t['python_peak_mib']:.0f} MiB"
+        python = (f"Python/NumPy peak {t['python_peak_mib']:.0f} MiB" if t.get("python_peak_mib") is not None
+                  else "Python/NumPy allocations not traced (--profile-python-memory)")
+        parts.append(f"Peak RSS {t['rss_peak_mib']:.0f} MiB (+{t['rss_growth_mib']:.0f} in this task), {python}"
                      + (f", torch CUDA peak {t['torch_cuda_peak_mib']:.0f} MiB" if "torch_cuda_peak_mib" in t else "")
                      + (f", {t['images_per_s']:.2f} images/s" if t.get("images_per_s") else "") + ".\n")
         sampled = t.get("rss_sampled") or {}

@@ -36,7 +36,7 @@ def two_runs(tmp_path_factory):
         mp.setattr(attacks.restorer_training, "train_restorer", counting)
         first = runner.run(cfg(["nafnet-known-pairs", "lpdr-oracle"]))
         trained_first = len(trainings)
-        with profiling.profiled(out, get_profile("smoke").n_val) as profiler:
+        with profiling.profiled(out, get_profile("smoke").n_val, trace_python=True) as profiler:
             second = runner.run(cfg(["nafnet-known-pairs", "lpdr-oracle", "identity"]))
     return first, second, trained_first, len(trainings) - trained_first, out, profiler
 
@@ -96,3 +96,25 @@ def test_profiling_refuses_ray_and_does_nothing_when_off(tmp_path):
     assert not (tmp_path / "profile.json").exists()
     with profiling.task_scope(object()):  # no active profiler: a no-op whatever the task
         pass
+
+
+def test_python_allocations_are_traced_only_when_asked():
+    """tracemalloc slows Python-heavy tasks by about a third: off unless asked, and the report says so."""
+    import tracemalloc
+
+    from benchmark.planning import Task
+
+    seen = {}
+    for trace in (False, True):
+        profiler = profiling.RunProfiler(4, trace_python=trace)
+        with profiler.task(Task(kind="bound", seed=0, lens="ideal")):
+            seen[trace] = tracemalloc.is_tracing()
+            _ = [bytearray(1 << 20) for _ in range(8)]  # 8 MiB of Python allocations
+        assert not tracemalloc.is_tracing()
+        record = profiler.tasks[0]
+        if trace:
+            assert record["python_peak_mib"] >= 8
+        else:
+            assert record["python_peak_mib"] is None
+            assert "not traced (--profile-python-memory)" in profiling.render_markdown(profiler.summary())
+    assert seen == {False: False, True: True}
