@@ -121,14 +121,14 @@ class RunProfiler:
         finally:
             profile.disable()
             seconds = time.perf_counter() - t0
-            traced_peak = tracemalloc.get_traced_memory()[1] if self.trace_python else None
+            python_peak_mib = tracemalloc.get_traced_memory()[1] / 2**20 if self.trace_python else None
             if traced_here:
                 tracemalloc.stop()
             record: dict[str, Any] = {
                 "key": task.key, "kind": task.kind, "label": _label(task), "lens": task.lens, "seed": task.seed,
                 "seconds": seconds,
                 "rss_peak_mib": _maxrss_mib(), "rss_growth_mib": _maxrss_mib() - rss_before,
-                "python_peak_mib": None if traced_peak is None else traced_peak / 2**20,
+                "python_peak_mib": python_peak_mib,
                 **({"torch_cuda_peak_mib": torch.cuda.max_memory_allocated() / 2**20} if cuda else {}),
                 "rss_sampled": sampler.summary(),
             }
