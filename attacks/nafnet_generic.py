@@ -33,7 +33,8 @@ from torch import Tensor
 from attacks.base import FitContext, Restorer, ThreatModel
 from attacks.degradations import degrade
 from attacks.gray_world import gray_world_balance
-from attacks.networks.nafnet import load_nafnet_checkpoint
+from attacks.networks.nafnet import NAFNet, load_nafnet_checkpoint
+from attacks.networks.nafnet_folded import fold_for_inference
 from attacks.onnx_backend import InferenceEngine, check_backend
 from attacks.shipped_weights import Shipped, find_shipped
 from attacks.restorer_training import (
@@ -63,7 +64,9 @@ class NafnetGeneric(Restorer):
         trained: After ``fit``: True if it trained, False if the weights came from the cache,
             the package or the checkpoint.
         shipped: After ``fit``: the shipped weights used, or None.
-        engine: After ``fit``: the inference engine.
+        network: After ``fit``: the NAFNet (trained, shipped or the checkpoint's).
+        engine: After ``fit``: the inference engine, running ``network`` folded for inference
+            (``attacks.networks.nafnet_folded``).
     """
 
     name: ClassVar[str] = "nafnet-generic"
@@ -80,6 +83,7 @@ class NafnetGeneric(Restorer):
         self.shipped: Shipped | None = None
         self.budget: RestorerBudget | None = None
         self.trained: bool | None = None
+        self.network: NAFNet | None = None
         self.engine: InferenceEngine | None = None
         self._checkpoint_sha256: str | None = None
 
@@ -111,7 +115,8 @@ class NafnetGeneric(Restorer):
             else:
                 model, self.trained = fit_nafnet(budget, ctx, self.name, key, next_batch)
             self.budget = budget
-        self.engine = InferenceEngine(model.to(ctx.device), self.backend)
+        self.network = model.to(ctx.device).eval()
+        self.engine = InferenceEngine(fold_for_inference(self.network), self.backend)
 
     def cache_key(self, ctx: FitContext) -> dict[str, Any]:
         """The configuration its trained weights are cached (and shipped) under: budget, training crops, seed."""

@@ -15,6 +15,8 @@ import torch
 from torch import Tensor
 
 from attacks.base import FitContext, Restorer, ThreatModel
+from attacks.networks.nafnet import NAFNet
+from attacks.networks.nafnet_folded import fold_for_inference
 from attacks.onnx_backend import InferenceEngine, check_backend
 from attacks.restorer_training import (
     RestorerBudget,
@@ -37,7 +39,9 @@ class NafnetKnownPairs(Restorer):
 
     Attributes:
         trained: After ``fit``: True if it trained, False if the weights came from the cache.
-        engine: After ``fit``: the inference engine (``engine.backend`` says which is in use).
+        network: After ``fit``: the trained NAFNet.
+        engine: After ``fit``: the inference engine (``engine.backend`` says which is in use), running
+            ``network`` folded for inference (``attacks.networks.nafnet_folded``).
     """
 
     name: ClassVar[str] = "nafnet-known-pairs"
@@ -48,6 +52,7 @@ class NafnetKnownPairs(Restorer):
         self.backend = check_backend(backend)
         self.budget: RestorerBudget | None = None
         self.trained: bool | None = None
+        self.network: NAFNet | None = None
         self.engine: InferenceEngine | None = None
 
     def fit(self, ctx: FitContext) -> None:
@@ -64,7 +69,8 @@ class NafnetKnownPairs(Restorer):
 
         model, self.trained = fit_nafnet(budget, ctx, self.name, key, next_batch)
         self.budget = budget
-        self.engine = InferenceEngine(model.to(ctx.device), self.backend)
+        self.network = model.to(ctx.device).eval()
+        self.engine = InferenceEngine(fold_for_inference(self.network), self.backend)
 
     def restore(self, sensor: Tensor) -> Tensor:
         """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""

@@ -67,8 +67,8 @@ def main(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     attacker.fit(ctx)
     fit_s = time.perf_counter() - t0
-    assert attacker.engine is not None and attacker.budget is not None
-    model = attacker.engine.model
+    assert attacker.network is not None and attacker.budget is not None
+    model = attacker.network
     state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
     key = attacker.cache_key(ctx)
     made = {"commit": commit, "command": f"python -m benchmark pretrain-attacker {args.attacker} --profile "

@@ -85,8 +85,9 @@ def check_reads(name: str, reads: object, n_images: int) -> list[list[attacks.Pl
 # batch. RED10 (width 32) on 512 x 1024 frames raised the resident peak by 2.2 GiB in batches of 8,
 # 0.6 GiB in batches of 2 and 0.3 GiB one by one, at the same speed (2.9, 2.8, 2.7 s for 8 frames, 2
 # threads; 2026-11-26); in a quick run it set the process's peak (12.0 GiB), though an evaluation alone
-# in its own process peaked only 0.17 GiB lower with it (5.53 -> 5.36 GiB). Plate windows (>= 256 x 256)
-# stay in batches of the profile's size.
+# in its own process peaked only 0.17 GiB lower with it (5.53 -> 5.36 GiB). Plate windows (256 x 256 to
+# 512 x 704 in quick) are bounded the same way: RED10 on 8 windows of 512 x 576 set a fresh quick gp
+# run's peak (9.4 GiB, 2026-11-27).
 RESTORE_PIXELS_PER_BATCH = 2 * 512 * 1024
 
 
@@ -106,9 +107,11 @@ def restore_all(attacker: attacks.Restorer, sensor: torch.Tensor, batch_size: in
     return torch.cat(outs)
 
 
-def shape_batches(images: torch.Tensor | Sequence[torch.Tensor], size: int) -> Iterator[tuple[int, torch.Tensor]]:
+def shape_batches(images: torch.Tensor | Sequence[torch.Tensor], size: int, max_pixels: int | None = None
+                  ) -> Iterator[tuple[int, torch.Tensor]]:
     """(index of the first image, batch (B,3,H,W)) over `images`: a tensor (N,3,H,W) in slices of
-    `size`, or a sequence of (3,h,w) tensors in runs of consecutive equal shapes, at most `size` each."""
+    `size`, or a sequence of (3,h,w) tensors in runs of consecutive equal shapes, at most `size` each
+    and, given `max_pixels`, at most that many pixels (at least one image)."""
     if isinstance(images, torch.Tensor):
         for start in range(0, images.shape[0], size):
             yield start, images[start:start + size]
@@ -116,7 +119,9 @@ def shape_batches(images: torch.Tensor | Sequence[torch.Tensor], size: int) -> I
     start = 0
     while start < len(images):
         end = start + 1
-        while end < len(images) and end - start < size and images[end].shape == images[start].shape:
+        pixels = int(images[start].shape[-2]) * int(images[start].shape[-1])
+        limit = size if max_pixels is None else max(1, min(size, max_pixels // pixels))
+        while end < len(images) and end - start < limit and images[end].shape == images[start].shape:
             end += 1
         yield start, torch.stack(list(images[start:end]))
         start = end
@@ -124,10 +129,11 @@ def shape_batches(images: torch.Tensor | Sequence[torch.Tensor], size: int) -> I
 
 def restore_windows(attacker: attacks.Restorer, windows: Sequence[torch.Tensor], batch_size: int, device: str
                     ) -> list[torch.Tensor]:
-    """The attacker's restorations (3,h,w) of sensor windows of several sizes, checked, on the CPU."""
+    """The attacker's restorations (3,h,w) of sensor windows of several sizes, checked, on the CPU, at
+    most ``batch_size`` windows (and ``RESTORE_PIXELS_PER_BATCH`` pixels) per call."""
     outs: list[torch.Tensor] = []
     with torch.no_grad():
-        for _, b in shape_batches(windows, batch_size):
+        for _, b in shape_batches(windows, batch_size, RESTORE_PIXELS_PER_BATCH):
             outs.extend(check_restored(attacker.name, attacker.restore(b.to(device)), b.to(device)).cpu())
     return outs
 

@@ -56,7 +56,7 @@ def test_shipped_weights_are_what_the_fit_trains_and_replace_it(fake_lens, tmp_p
     trained.fit(ctx)
     assert trained.trained is True and trained.shipped is None
     from safetensors.torch import save
-    state = {k: v.contiguous() for k, v in trained.engine.model.state_dict().items()}
+    state = {k: v.contiguous() for k, v in trained.network.state_dict().items()}
     write_shipped("nafnet-generic-tiny", "nafnet-generic", trained.cache_key(ctx), save(state), {"commit": "t"},
                   tmp_path / "shipped")
     monkeypatch.setattr(shipped_weights, "SHIPPED_DIR", tmp_path / "shipped")

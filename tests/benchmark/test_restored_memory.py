@@ -83,3 +83,22 @@ def test_whole_frames_are_restored_a_pixel_budget_at_a_time_in_order():
     out = restore_all(restorer, big, 8, "cpu")
     assert restorer.batches == [2, 2, 1]
     torch.testing.assert_close(out, big.flip(-1), rtol=0, atol=0)
+
+
+def test_plate_windows_are_restored_a_pixel_budget_at_a_time_in_order():
+    """Windows of one shape go at most the profile's batch and RESTORE_PIXELS_PER_BATCH pixels per call;
+    the restorations come back complete and in order."""
+    from benchmark.evaluation import RESTORE_PIXELS_PER_BATCH, restore_windows
+    g = torch.Generator().manual_seed(0)
+    windows = [torch.rand(3, 512, 512, generator=g) for _ in range(5)] + [torch.rand(3, 64, 64, generator=g)
+                                                                          for _ in range(3)]
+    assert RESTORE_PIXELS_PER_BATCH // (512 * 512) == 4
+    restorer = _Recording()
+    out = restore_windows(restorer, windows, 2, "cpu")
+    assert restorer.batches == [2, 2, 1, 2, 1]
+    restorer = _Recording()
+    out = restore_windows(restorer, windows, 8, "cpu")
+    assert restorer.batches == [4, 1, 3]
+    assert len(out) == len(windows)
+    for got, want in zip(out, windows):
+        torch.testing.assert_close(got, want.flip(-1), rtol=0, atol=0)
