@@ -124,12 +124,21 @@ def test_tiny_forward_backward() -> None:
     assert x.grad is not None and x.grad.abs().sum() > 0
 
 
-def test_layernorm2d_matches_functional_layer_norm() -> None:
+def test_layernorm2d_normalises_each_pixels_channels() -> None:
+    """Against the definition written out in float64, and its gradients (and their gradients, the
+    co-design's gradient penalty differentiates through a gradient) against finite differences."""
     g = torch.Generator().manual_seed(0)
     norm = LayerNorm2d(6)
     with torch.no_grad():
         norm.weight.copy_(torch.randn(6, generator=g))
         norm.bias.copy_(torch.randn(6, generator=g))
     x = 3 * torch.randn(2, 6, 5, 7, generator=g) + 1
-    expected = F.layer_norm(x.permute(0, 2, 3, 1), (6,), norm.weight, norm.bias, eps=1e-6).permute(0, 3, 1, 2)
-    torch.testing.assert_close(norm(x), expected, rtol=1e-5, atol=1e-5)
+    d = x.double()
+    centred = d - d.mean(dim=1, keepdim=True)
+    y = centred / torch.sqrt(centred.pow(2).mean(dim=1, keepdim=True) + 1e-6)
+    expected = norm.weight.double().view(1, -1, 1, 1) * y + norm.bias.double().view(1, -1, 1, 1)
+    torch.testing.assert_close(norm(x).double(), expected, rtol=1e-5, atol=1e-5)
+    norm64 = norm.double()
+    x64 = torch.randn(1, 6, 3, 4, generator=g, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(norm64, (x64,))
+    assert torch.autograd.gradgradcheck(norm64, (x64,))
