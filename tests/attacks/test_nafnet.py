@@ -4,7 +4,6 @@ from pathlib import Path
 
 import pytest
 import torch
-import torch.nn.functional as F
 from safetensors.torch import save_file
 
 from attacks.networks.nafnet import LayerNorm2d, NAFBlock, NAFNet, load_nafnet_checkpoint
