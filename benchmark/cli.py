@@ -188,8 +188,6 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(api.plan(**options).render())
         return 0
     out = args.out or Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    if args.profile_python_memory and not args.profile_time:
-        raise SystemExit("--profile-python-memory needs --profile-time")
     profiled = (profiling.profiled(out, get_profile(args.profile).n_val, args.device, args.executor,
                                    trace_python=args.profile_python_memory)
                 if args.profile_time else contextlib.nullcontext())
@@ -303,7 +301,13 @@ def main(argv: list[str] | None = None) -> int:
     from lenses.registry import DuplicateNameError
     from benchmark.known_warnings import silence_known_warnings
     silence_known_warnings()
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command == "run" and args.profile_python_memory and not args.profile_time:
+        parser.error("--profile-python-memory traces allocations inside --profile-time's profile; add --profile-time")
+    if args.command == "run" and args.dry_run and (args.profile_time or args.publish):
+        parser.error("--dry-run computes nothing, so there is nothing to " +
+                     ("profile (--profile-time)" if args.profile_time else "publish (--publish)") + "; drop one of them")
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", force=True)
     commands = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "train": cmd_train, "study": cmd_study,

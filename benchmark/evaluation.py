@@ -23,6 +23,7 @@ import attacks
 from benchmark.budget import time_budget
 from benchmark.intervals import plate_intervals, scene_intervals
 from benchmark.metrics import psnr, ssim
+from benchmark.native_memory import release_free_memory
 from benchmark.plate_scoring import PlateOutcome, readable, score_scene, summarise
 from benchmark.rows import RowBuilder, plate_units, scene_units
 from benchmark.run_config import RunConfig
@@ -265,62 +266,67 @@ def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dic
     only one restorer's plate windows are in memory at a time.
 
     `restorers` is consumed: each restorer is dropped from it once scored, so that its network and
-    inference session (about 1 GB for a quick NAFNet in ONNX Runtime) go before the next one loads."""
-    for attacker in tqdm(_drain(restorers), total=len(restorers), desc=f"{target.lens_name} restorers", leave=False):
-        # A reference (e.g. the uncorrected image) is reported, but never as an attack.
-        kind = "reference" if getattr(attacker, "reference", False) else "restorer"
-        settings = {"restorer": attacker.describe()}
-        meta = fitted.get(attacker.name, {})
-        if "skipped" in meta:
-            log.info("%s on %s skipped: %s", attacker.name, target.lens_name, meta["skipped"])
-            continue
-        if "error" in meta:
-            out.rows.append(rows.failed(kind, attacker.name, RowError(**meta["error"]), restorer=attacker.name,
-                                        settings=settings))
-            continue
-        t0 = time.perf_counter()
-        error = attempt(attacker.name, "fit", lambda: attacker.fit(target.ctx), cfg.budget_s)  # normally a cache hit
-        fit_s = meta.get("fit_s", time.perf_counter() - t0)  # fitted here when its task's result was not kept
-        t0 = time.perf_counter()
-        restored = error if isinstance(error, RowError) else attempt(
-            attacker.name, "restore", lambda: restore_all(attacker, target.sensor, cfg.profile.batch_size, cfg.device),
-            cfg.budget_s)
-        if isinstance(restored, RowError):
-            out.rows.append(rows.failed(kind, attacker.name, restored, restorer=attacker.name, settings=settings))
-            continue
-        run_s = time.perf_counter() - t0
-        if target.plates is not None:
-            windows = attempt(attacker.name, "restore", lambda: restore_windows(
-                attacker, target.plates.sensor, cfg.profile.batch_size, cfg.device))  # type: ignore[union-attr]
-            if isinstance(windows, RowError):
-                out.rows.append(rows.failed(kind, attacker.name, windows, restorer=attacker.name, settings=settings))
-                continue
-        # Of the scenes only the sample picture's first one is kept (every restorer's 64 full scenes
-        # would hold gigabytes); a clone, as a slice would keep the whole batch's storage alive.
-        out.restored[attacker.name] = restored if target.plates is None else restored[:1].clone()
-        out.described[attacker.name] = attacker.describe()
-        if kind == "reference":
-            out.references.add(attacker.name)
-        metrics, per_image = restoration_metrics(restored, target.sharp)
-        for reader in readers:
-            read_chain(target, reader, attacker.name, restored if target.plates is None else windows, cfg, rows, out)
-        del restored
-        if target.plates is not None:
-            out.restored_plates[attacker.name] = {i: windows[i] for i in gallery_windows(target.plates)}
-            del windows
-        metrics.update({"fit_s": float(fit_s), "images_per_s": target.sharp.shape[0] / run_s})
-        row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
-                       threat_model=attacker.threat_model.value, settings={"restorer": attacker.describe()})
-        scene_intervals(row, per_image, seed=row.seed)
-        row.set_units(scene_units(target.scenes, per_image))
-        out.rows.append(row)
-        log.debug("%s on %s: resident memory %.2f GB", attacker.name, target.lens_name, resident_gb())
+    inference session (about 1 GB for a quick NAFNet in ONNX Runtime) go, and the memory they held
+    goes back to the system (``release_free_memory``), before the next one loads."""
+    bar = tqdm(total=len(restorers), desc=f"{target.lens_name} restorers", leave=False)
+    while restorers:
+        _restore_and_score(restorers.pop(0), target, fitted, cfg, rows, out, readers)
+        release_free_memory()
+        bar.update()
+    bar.close()
 
 
-def _drain(items: list[T]) -> Iterator[T]:
-    """The items of `items`, each removed from the list as it is handed out."""
-    while items:
-        yield items.pop(0)
+def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[str, dict], cfg: RunConfig,
+                       rows: RowBuilder, out: Attacked, readers: Sequence[ReadyReader]) -> None:
+    """One restorer of ``run_restorers``: restore, score, read with each reader."""
+    # A reference (e.g. the uncorrected image) is reported, but never as an attack.
+    kind = "reference" if getattr(attacker, "reference", False) else "restorer"
+    settings = {"restorer": attacker.describe()}
+    meta = fitted.get(attacker.name, {})
+    if "skipped" in meta:
+        log.info("%s on %s skipped: %s", attacker.name, target.lens_name, meta["skipped"])
+        return
+    if "error" in meta:
+        out.rows.append(rows.failed(kind, attacker.name, RowError(**meta["error"]), restorer=attacker.name,
+                                    settings=settings))
+        return
+    t0 = time.perf_counter()
+    error = attempt(attacker.name, "fit", lambda: attacker.fit(target.ctx), cfg.budget_s)  # normally a cache hit
+    fit_s = meta.get("fit_s", time.perf_counter() - t0)  # fitted here when its task's result was not kept
+    t0 = time.perf_counter()
+    restored = error if isinstance(error, RowError) else attempt(
+        attacker.name, "restore", lambda: restore_all(attacker, target.sensor, cfg.profile.batch_size, cfg.device),
+        cfg.budget_s)
+    if isinstance(restored, RowError):
+        out.rows.append(rows.failed(kind, attacker.name, restored, restorer=attacker.name, settings=settings))
+        return
+    run_s = time.perf_counter() - t0
+    if target.plates is not None:
+        windows = attempt(attacker.name, "restore", lambda: restore_windows(
+            attacker, target.plates.sensor, cfg.profile.batch_size, cfg.device))  # type: ignore[union-attr]
+        if isinstance(windows, RowError):
+            out.rows.append(rows.failed(kind, attacker.name, windows, restorer=attacker.name, settings=settings))
+            return
+    # Of the scenes only the sample picture's first one is kept (every restorer's 64 full scenes
+    # would hold gigabytes); a clone, as a slice would keep the whole batch's storage alive.
+    out.restored[attacker.name] = restored if target.plates is None else restored[:1].clone()
+    out.described[attacker.name] = attacker.describe()
+    if kind == "reference":
+        out.references.add(attacker.name)
+    metrics, per_image = restoration_metrics(restored, target.sharp)
+    for reader in readers:
+        read_chain(target, reader, attacker.name, restored if target.plates is None else windows, cfg, rows, out)
+    del restored
+    if target.plates is not None:
+        out.restored_plates[attacker.name] = {i: windows[i] for i in gallery_windows(target.plates)}
+        del windows
+    metrics.update({"fit_s": float(fit_s), "images_per_s": target.sharp.shape[0] / run_s})
+    row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
+                   threat_model=attacker.threat_model.value, settings={"restorer": attacker.describe()})
+    scene_intervals(row, per_image, seed=row.seed)
+    row.set_units(scene_units(target.scenes, per_image))
+    out.rows.append(row)
+    log.debug("%s on %s: resident memory %.2f GB", row.attack, target.lens_name, resident_gb())
 
 
 def resident_gb() -> float:

@@ -13,6 +13,7 @@ from typing import Protocol
 import torch
 from tqdm.auto import tqdm
 
+from benchmark.native_memory import release_free_memory
 from benchmark.planning import Task
 from benchmark.run_config import RunConfig
 from benchmark.tasks import TaskResult, execute
@@ -25,19 +26,24 @@ class Executor(Protocol):
 
 
 class LocalExecutor:
-    """Tasks in plan order, in this process."""
+    """Tasks in plan order, in this process, which hands the memory each task freed back to the
+    system before the next starts (``native_memory.release_free_memory``)."""
 
     def run(self, tasks: list[Task], cfg: RunConfig, directory: Path) -> dict[str, TaskResult]:
         results = {}
         for task in tqdm(tasks, desc="tasks", unit="task"):
             results[task.key] = execute(task, cfg, directory)
+            release_free_memory()
         return results
 
 
 def _remote_execute(task: Task, cfg: RunConfig, directory: Path, threads: int, *_deps: object) -> TaskResult:
     # Same intra-op thread count as the driver: float reductions, hence the numbers, stay identical.
     torch.set_num_threads(threads)
-    return execute(task, cfg, directory)
+    try:
+        return execute(task, cfg, directory)
+    finally:
+        release_free_memory()  # the worker process lives on for the next task
 
 
 class RayExecutor:

@@ -72,3 +72,18 @@ def test_list_shows_lenses_attackers_and_scene_sets():
     assert proc.returncode == 0
     for name in ("ideal", "defocus", "random-zernike", "identity", "wiener-known-psf", "synthetic", "photos"):
         assert name in proc.stdout
+
+
+@pytest.mark.parametrize("flags, named", [
+    (["--profile-python-memory"], "--profile-time"),
+    (["--dry-run", "--profile-time"], "--profile-time"),
+    (["--dry-run", "--publish"], "--publish"),
+])
+def test_run_flags_that_cannot_go_together_are_refused_before_any_work(flags, named, tmp_path, capsys):
+    from benchmark.cli import main
+    with pytest.raises(SystemExit) as stop:
+        main(["run", "--lens", "ideal", "--profile", "smoke", "--out", str(tmp_path / "out"), *flags])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert named in err and "usage:" in err
+    assert not (tmp_path / "out").exists()
