@@ -34,8 +34,12 @@ class NafnetKnownPairs(Restorer):
     """NAFNet trained on the lens's own TRAIN pairs; restores sensor images directly.
 
     Args:
-        backend: Inference backend, "auto" (time torch and ONNX Runtime once, keep the faster),
-            "torch" or "onnx" (``attacks.onnx_backend``).
+        backend: Inference backend, "onnx", "auto" (time torch and ONNX Runtime once, keep the
+            faster) or "torch" (``attacks.onnx_backend``).
+            ONNX Runtime by default (torch where the network is not on the CPU or the export
+            fails): on 2 cores it ran the folded quick NAFNet about 2.5x as fast as torch at 512 x 1024, while
+            "auto"'s one-image probe once picked torch (0.84 against 1.30 s), which then restored at
+            0.37 images/s against 0.77 (fresh quick gp runs, 2026-11-27).
 
     Attributes:
         trained: After ``fit``: True if it trained, False if the weights came from the cache.
@@ -48,7 +52,7 @@ class NafnetKnownPairs(Restorer):
     threat_model: ClassVar[ThreatModel] = ThreatModel.KNOWN_PAIRS
     requires: ClassVar[frozenset[str]] = frozenset({"lens", "train_pairs"})
 
-    def __init__(self, backend: str = "auto") -> None:
+    def __init__(self, backend: str = "onnx") -> None:
         self.backend = check_backend(backend)
         self.budget: RestorerBudget | None = None
         self.trained: bool | None = None
@@ -70,7 +74,7 @@ class NafnetKnownPairs(Restorer):
         model, self.trained = fit_nafnet(budget, ctx, self.name, key, next_batch)
         self.budget = budget
         self.network = model.to(ctx.device).eval()
-        self.engine = InferenceEngine(fold_for_inference(self.network), self.backend)
+        self.engine = InferenceEngine(fold_for_inference(self.network), self.backend, fallback=True)
 
     def restore(self, sensor: Tensor) -> Tensor:
         """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""

@@ -123,8 +123,8 @@ class InferenceEngine:
             default ``export_onnx`` on an example of ``export_hw``.
         batch_pixels: Images per network call are as many as fit in this many pixels (at least
             one), which bounds peak memory at full resolution.
-        fallback: With backend "onnx": if the export fails, use torch (logging why) instead of
-            raising. "auto" always falls back.
+        fallback: With backend "onnx": if the model is not on the CPU or the export fails, use torch
+            (logging why) instead of raising. "auto" always falls back.
 
     Attributes:
         backend: The backend in use, "torch" or "onnx" ("auto" until the first call decides).
@@ -145,10 +145,11 @@ class InferenceEngine:
         self.fallback_reason: str | None = None
         self._onnx: OnnxModel | None = None
         on_cpu = all(p.device.type == "cpu" for p in model.parameters())
-        if backend == "onnx" and not on_cpu:
+        if backend == "onnx" and not on_cpu and not fallback:
             raise ValueError("backend='onnx' runs on the CPU; move the model to the CPU or use 'torch'")
-        if backend == "auto" and not on_cpu:
+        if backend in ("auto", "onnx") and not on_cpu:
             self.fallback_reason = "the model is not on the CPU"
+            backend = "torch"
         if backend == "onnx" or (backend == "auto" and on_cpu):
             export = exporter or (lambda: export_onnx(self.model, torch.rand(1, _channels(model), *export_hw)))
             try:

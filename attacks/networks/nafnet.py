@@ -42,9 +42,10 @@ class LayerNorm2d(nn.Module):
         self.weight = nn.Parameter(torch.ones(channels))
         self.bias = nn.Parameter(torch.zeros(channels))
         self.eps = eps
+        self.channels = channels  # a plain int, so an exported graph holds a constant normalised shape
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        channels_last = F.layer_norm(x.permute(0, 2, 3, 1), (x.shape[1],), self.weight, self.bias, self.eps)
+        channels_last = F.layer_norm(x.permute(0, 2, 3, 1), (self.channels,), self.weight, self.bias, self.eps)
         return channels_last.permute(0, 3, 1, 2)
 
 
