@@ -92,10 +92,10 @@ def check_reads(name: str, reads: object, n_images: int) -> list[list[attacks.Pl
 RESTORE_PIXELS_PER_BATCH = 2 * 512 * 1024
 
 
-def frames_per_batch(images: torch.Tensor, batch_size: int) -> int:
-    """How many of ``images`` (N,3,H,W) one restore call takes: ``batch_size``, fewer where that would pass
-    ``RESTORE_PIXELS_PER_BATCH`` pixels, at least one."""
-    return max(1, min(batch_size, RESTORE_PIXELS_PER_BATCH // (int(images.shape[-2]) * int(images.shape[-1]))))
+def frames_per_batch(images: torch.Tensor, batch_size: int, max_pixels: int = RESTORE_PIXELS_PER_BATCH) -> int:
+    """How many images shaped like ``images`` (...,H,W) one call takes: ``batch_size``, fewer where
+    that would pass ``max_pixels`` pixels, at least one."""
+    return max(1, min(batch_size, max_pixels // (int(images.shape[-2]) * int(images.shape[-1]))))
 
 
 def restore_all(attacker: attacks.Restorer, sensor: torch.Tensor, batch_size: int, device: str) -> torch.Tensor:
@@ -120,8 +120,7 @@ def shape_batches(images: torch.Tensor | Sequence[torch.Tensor], size: int, max_
     start = 0
     while start < len(images):
         end = start + 1
-        pixels = int(images[start].shape[-2]) * int(images[start].shape[-1])
-        limit = size if max_pixels is None else max(1, min(size, max_pixels // pixels))
+        limit = size if max_pixels is None else frames_per_batch(images[start], size, max_pixels)
         while end < len(images) and end - start < limit and images[end].shape == images[start].shape:
             end += 1
         yield start, torch.stack(list(images[start:end]))
@@ -268,12 +267,11 @@ def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dic
     `restorers` is consumed: each restorer is dropped from it once scored, so that its network and
     inference session (about 1 GB for a quick NAFNet in ONNX Runtime) go, and the memory they held
     goes back to the system (``release_free_memory``), before the next one loads."""
-    bar = tqdm(total=len(restorers), desc=f"{target.lens_name} restorers", leave=False)
-    while restorers:
-        _restore_and_score(restorers.pop(0), target, fitted, cfg, rows, out, readers)
-        release_free_memory()
-        bar.update()
-    bar.close()
+    with tqdm(total=len(restorers), desc=f"{target.lens_name} restorers", leave=False) as bar:
+        while restorers:
+            _restore_and_score(restorers.pop(0), target, fitted, cfg, rows, out, readers)
+            release_free_memory()
+            bar.update()
 
 
 def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[str, dict], cfg: RunConfig,
