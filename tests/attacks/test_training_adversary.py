@@ -29,6 +29,27 @@ def test_restores_with_the_lens_adversary(codesigned_lens, backend):
     assert attack.describe()["network"] == "RED10"
 
 
+def test_runs_through_onnx_runtime_by_default_and_torch_when_the_export_fails(codesigned_lens, monkeypatch):
+    ctx = attacks.FitContext(lens=codesigned_lens)
+    sensor = torch.rand(1, 3, 24, 40, generator=torch.Generator().manual_seed(2))
+    with torch.no_grad():
+        expected = codesigned_lens.adversary(sensor).clamp(0, 1)
+    attack = attacks.load("training-adversary")
+    attack.fit(ctx)
+    assert attack.engine.backend == "onnx" and attack.describe()["backend"] == "onnx"
+
+    def broken_export(*_args, **_kwargs):
+        raise RuntimeError("operator not supported")
+
+    monkeypatch.setattr("attacks.onnx_backend.export_onnx", broken_export)
+    fallback = attacks.load("training-adversary")
+    fallback.fit(ctx)
+    assert fallback.engine.backend == "torch"
+    assert "operator not supported" in fallback.engine.describe()["fallback_reason"]
+    for a in (attack, fallback):
+        torch.testing.assert_close(a.restore(sensor), expected, atol=1e-4, rtol=0)
+
+
 def test_scores_a_frozen_copy(codesigned_lens):
     attack = attacks.load("training-adversary", backend="torch")
     attack.fit(attacks.FitContext(lens=codesigned_lens))
