@@ -8,6 +8,8 @@ OpenCV's separable filter.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import cv2
 import numpy as np
 import torch
@@ -17,8 +19,13 @@ _RADIUS = int(3.5 * _SIGMA + 0.5)  # scikit-image's gaussian truncation (truncat
 
 
 def psnr(x: torch.Tensor, ref: torch.Tensor, data_range: float = 1.0) -> torch.Tensor:
-    """PSNR in dB per image of (B,C,H,W) tensors; inf where identical."""
-    mse = ((x.double() - ref.double()) ** 2).flatten(1).mean(dim=1)
+    """PSNR in dB per image of (B,C,H,W) tensors; inf where identical.
+
+    One image at a time: the float64 differences of a chunk of 8 quick scenes (three 100 MB
+    temporaries) set a fresh quick gp run's resident peak (7.83 GiB, 2026-11-27)."""
+    if x.shape[0] == 0:
+        return torch.zeros(0, dtype=torch.float64, device=x.device)
+    mse = torch.stack([((a.double() - b.double()) ** 2).mean() for a, b in zip(x, ref)])
     return 10 * torch.log10(data_range**2 / mse)
 
 
@@ -50,15 +57,22 @@ def ssim(x: torch.Tensor, ref: torch.Tensor, data_range: float = 1.0) -> torch.T
 
     xs = x.detach().cpu().double().numpy()
     rs = ref.detach().cpu().double().numpy()
-    out = np.empty(x.shape[:2])
-    for i, c in np.ndindex(*x.shape[:2]):
-        a, b = xs[i, c], rs[i, c]
+
+    def channel(index: tuple[int, ...]) -> float:
+        a, b = xs[index], rs[index]
         mu_a, mu_b = blur(a), blur(b)
         saa = blur(a * a) - mu_a**2
         sbb = blur(b * b) - mu_b**2
         sab = blur(a * b) - mu_a * mu_b
         s = ((2 * mu_a * mu_b + c1) * (2 * sab + c2)) / ((mu_a**2 + mu_b**2 + c1) * (saa + sbb + c2))
-        out[i, c] = s.mean()
+        return float(s.mean())
+
+    # OpenCV's filter and NumPy's arithmetic release the GIL and run one thread each, so channel
+    # images go to torch's thread count of threads (2 cores: 1.55x, 0.85 s against 1.31 s for 8
+    # quick scenes; the same arithmetic per channel, so the same values bit for bit).
+    with ThreadPoolExecutor(max(1, torch.get_num_threads())) as pool:
+        values = list(pool.map(channel, np.ndindex(*x.shape[:2])))
+    out = np.array(values, dtype=np.float64).reshape(x.shape[:2])
     return torch.from_numpy(out.mean(axis=1))
 
 
