@@ -89,3 +89,16 @@ def test_same_seed_same_image_and_straight_through_gradient():
     assert torch.equal(a, b) and not torch.equal(a, c)
     a.sum().backward()
     assert x.grad is not None and float(x.grad.abs().sum()) > 0
+
+
+def test_quantize_without_a_graph_is_the_straight_through_value_bit_for_bit():
+    from lenses.sensor import quantize_ste
+    x = torch.cat([torch.rand(100_000, generator=torch.Generator().manual_seed(0)) * 1023,
+                   torch.arange(0, 1024, 0.5), torch.tensor([0.0, 0.49999997, 0.5, 1.5, 2.5, 1022.5])])
+    straight_through = x + (torch.round(x) - x)
+    assert torch.equal(quantize_ste(x), straight_through)
+    y = x.clone().requires_grad_(True)
+    q = quantize_ste(y)
+    assert torch.equal(q.detach(), straight_through)
+    q.sum().backward()
+    assert torch.equal(y.grad, torch.ones_like(x))
