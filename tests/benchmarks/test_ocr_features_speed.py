@@ -57,8 +57,12 @@ def test_ocr_onnx_features_vs_torch(benchmark, request):
         benchmark.pedantic(lambda: plate_ocr.recognize_rows(ocr, rows, "onnx"), rounds=1, iterations=1)
     finally:
         torch.set_num_threads(threads)
-    confident = [k for k, (_, score) in reads["torch"].items() if score >= 0.5]
+    # As tests/attacks/test_ocr_onnx.py: confident reads agree exactly; an unsure character may flip
+    # (features equal to ~1e-6, then an 8-bit quantized tail), at most 1 crop in 20.
+    confident = [k for k, (_, score) in reads["torch"].items() if score >= 0.8]
     assert confident and all(reads["onnx"][k][0] == reads["torch"][k][0] for k in confident)
+    differing = [k for k in reads["torch"] if reads["onnx"][k][0] != reads["torch"][k][0]]
+    assert len(differing) <= max(1, len(rows) // 20), [(reads["torch"][k], reads["onnx"][k]) for k in differing]
     ratio = min(seconds["onnx"]) / min(seconds["torch"])
     benchmark.extra_info.update({"crops": len(rows), "ratio": ratio, "threads": THREADS,
                                  "load_average": list(os.getloadavg()),

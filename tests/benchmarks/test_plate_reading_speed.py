@@ -21,6 +21,7 @@ import torch
 
 import attacks
 import attacks.lpdr
+from attacks.plates import ocr as plate_ocr
 from attacks.plates.memo import forgetting
 from benchmark.scenes import load_scenes
 from plate_reference import recognize_one_at_a_time  # tests/plate_reference.py
@@ -36,6 +37,10 @@ def test_batched_plate_reading_vs_one_at_a_time(benchmark, request, monkeypatch)
     reader = attacks.load("lpdr-oracle")
     reader.fit(attacks.FitContext())
     batched_read = attacks.lpdr.read_plates
+    # Both ways compute the recognizer's features in torch, as the reader before batching did: this
+    # compares batching, not backends (ONNX Runtime's features agree to float rounding, which can move
+    # an unsure read's confidence by hundredths: tests/attacks/test_ocr_onnx.py).
+    monkeypatch.setattr(plate_ocr, "FEATURE_BACKEND", "torch")
 
     def batched():
         monkeypatch.setattr(attacks.lpdr, "read_plates", batched_read)
@@ -55,7 +60,14 @@ def test_batched_plate_reading_vs_one_at_a_time(benchmark, request, monkeypatch)
         read()
         return time.perf_counter() - t0, reader.stage_seconds["ocr"] - ocr_before
 
-    assert batched() == one_at_a_time()  # warm-up, and the same reads
+    # Warm-up, and the same reads: texts and boxes exactly; confidences within 0.05, as in
+    # tests/attacks/test_ocr_onnx.py: a batch's convolutions differ from one crop's by ~1e-6 on an AVX2
+    # CPU, and the 8-bit quantized tail can turn that into hundredths (one read of 11: 0.080 vs 0.088).
+    together_reads, alone_reads = batched(), one_at_a_time()
+    assert [[(r.text, r.box_xyxy) for r in per] for per in together_reads] == \
+        [[(r.text, r.box_xyxy) for r in per] for per in alone_reads]
+    np.testing.assert_allclose([r.score for per in together_reads for r in per],
+                               [r.score for per in alone_reads for r in per], rtol=0, atol=0.05)
     alone, together = [], []
     for _ in range(ROUNDS):  # interleaved, so that a change of machine load hits both
         alone.append(timed(one_at_a_time))
