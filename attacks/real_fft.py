@@ -1,11 +1,15 @@
 """Real 2-D FFTs for the deconvolution attackers, and the per-grid OTF cache they share.
 
-On the CPU, without autograd, the transforms go through ``scipy.fft`` (pocketfft) on the tensors'
-own memory: on this project's 2-core machine at the quick shapes (8 x 3 x 576 x 1080, float32) it
-ran ``rfft2`` 1.5x and ``irfft2`` 2.5x as fast as ``torch.fft``, whose inverse real transform
-copies its input first (tests/benchmarks/test_deconvolution_speed.py). Everywhere else (a GPU, a
-graph that needs gradients) ``torch.fft`` is used. Both compute the same transform to float
-rounding (tests/attacks/test_real_fft.py).
+Two implementations compute the same transforms to float rounding (tests/attacks/test_real_fft.py):
+``torch.fft``, and on the CPU without autograd ``scipy.fft`` (pocketfft) on the tensors' own memory,
+with the filter's product taken in place by numpy. Which is faster is a property of the machine and
+the versions, so ``CPU_FFT`` names the one used on the CPU; a GPU or a graph that needs gradients
+always takes ``torch.fft``. On the 2-core machine of 2026-11-25 (torch 2.15.0) scipy ran ``rfft2``
+1.5x and ``irfft2`` 2.5x as fast at the quick shapes; on the 2-core AVX2 machine of 2026-11-27
+(torch 2.14.1) torch.fft was the faster, both paths alternating in one run on the shapes of
+tests/benchmarks/test_deconvolution_speed.py: Richardson-Lucy 1.45x on 4 quick scenes and 1.26x on
+plate windows, Wiener 1.51x on windows and even (0.98) on scenes; one filtering of a 3 x 576 x 1080
+image took 18.7 against 25.8 ms.
 
 ``image_chunks`` splits a batch so that each chunk's spectrum stays under ``CHUNK_BYTES``: every
 temporary of an iteration then stays below glibc's 32 MiB mmap ceiling and is reused from the
@@ -23,7 +27,7 @@ import scipy.fft
 import torch
 from torch import Tensor
 
-__all__ = ["CHUNK_BYTES", "OtfCache", "circular_filter", "image_chunks", "irfft2", "rfft2", "rfft_otf"]
+__all__ = ["CHUNK_BYTES", "CPU_FFT", "OtfCache", "circular_filter", "image_chunks", "irfft2", "rfft2", "rfft_otf"]
 
 T = TypeVar("T")
 
@@ -31,8 +35,12 @@ CHUNK_BYTES = 16 << 20
 """Largest spectrum (bytes) of one chunk of images from ``image_chunks``."""
 
 
+CPU_FFT = "torch"
+"""The FFT used on the CPU without autograd: "torch" (``torch.fft``) or "scipy" (``scipy.fft``)."""
+
+
 def _scipy_ok(x: Tensor) -> bool:
-    return x.device.type == "cpu" and not (torch.is_grad_enabled() and x.requires_grad)
+    return CPU_FFT == "scipy" and x.device.type == "cpu" and not (torch.is_grad_enabled() and x.requires_grad)
 
 
 def rfft2(x: Tensor) -> Tensor:

@@ -8,8 +8,8 @@ iterations go on, so the iteration count is the regulariser. It is CHOSEN on the
 ``fit`` runs the ladder ``ITERATION_LADDER`` on a few ``ctx.train_pairs`` batches and keeps the
 count with the best mean PSNR (recorded in ``describe()``).
 
-Implementation: per-channel real-FFT convolutions (``attacks.real_fft``: scipy's pocketfft on the
-CPU, ``torch.fft`` elsewhere), the OTF computed once per image size and reused across batches,
+Implementation: per-channel real-FFT convolutions (``attacks.real_fft``: ``torch.fft``, or scipy's
+pocketfft on the CPU where that is faster), the OTF computed once per image size and reused across batches,
 a few images at a time so that every temporary stays small. As in ``wiener-known-psf``
 (whose helpers it reuses) the sensor image is first divided by the per-channel gain, then
 reflect-padded by the PSF radius with the pad tapered into its circularly blurred copy

@@ -1,4 +1,4 @@
-"""attacks.real_fft: the scipy path equals torch.fft, the OTF equals numpy's, chunks cover the batch."""
+"""attacks.real_fft: the scipy path (``CPU_FFT = "scipy"``) equals torch.fft, the OTF equals numpy's, chunks cover the batch."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ from attacks.real_fft import OtfCache, image_chunks, irfft2, rfft2, rfft_otf
 
 @pytest.mark.parametrize("dtype,atol", [(torch.float32, 2e-4), (torch.float64, 1e-10)])
 @pytest.mark.parametrize("shape", [(2, 3, 36, 50), (1, 3, 37, 53)], ids=["even", "odd"])
-def test_scipy_transforms_equal_torch_fft(dtype, atol, shape):
+def test_scipy_transforms_equal_torch_fft(monkeypatch, dtype, atol, shape):
+    monkeypatch.setattr(real_fft, "CPU_FFT", "scipy")
     x = torch.rand(*shape, generator=torch.Generator().manual_seed(0), dtype=dtype)
     spectrum = rfft2(x)
     assert spectrum.dtype == torch.fft.rfft2(x).dtype
@@ -68,8 +69,10 @@ def test_image_chunks_cover_the_batch_under_the_byte_bound(monkeypatch):
     assert list(image_chunks(0, 30)) == []
 
 
+@pytest.mark.parametrize("cpu_fft", ["torch", "scipy"])
 @pytest.mark.parametrize("dtype,atol", [(torch.float32, 2e-4), (torch.float64, 1e-10)])
-def test_circular_filter_equals_the_torch_product(dtype, atol):
+def test_circular_filter_equals_the_torch_product(monkeypatch, dtype, atol, cpu_fft):
+    monkeypatch.setattr(real_fft, "CPU_FFT", cpu_fft)
     g = torch.Generator().manual_seed(4)
     x = torch.rand(2, 3, 21, 30, generator=g, dtype=dtype)
     otf = rfft_otf(torch.rand(3, 5, 5, generator=g, dtype=dtype), (21, 30))
