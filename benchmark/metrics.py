@@ -55,11 +55,11 @@ def ssim(x: torch.Tensor, ref: torch.Tensor, data_range: float = 1.0) -> torch.T
     def blur(a: np.ndarray) -> np.ndarray:
         return cv2.sepFilter2D(a, cv2.CV_64F, w, w, borderType=cv2.BORDER_REFLECT)[inner]
 
-    xs = x.detach().cpu().double().numpy()
-    rs = ref.detach().cpu().double().numpy()
+    xs, rs = x.detach().cpu(), ref.detach().cpu()
 
     def channel(index: tuple[int, ...]) -> float:
-        a, b = xs[index], rs[index]
+        # float64 one channel image at a time (4 MB at 512 x 1024), not the whole batch at once.
+        a, b = xs[index].double().numpy(), rs[index].double().numpy()
         mu_a, mu_b = blur(a), blur(b)
         saa = blur(a * a) - mu_a**2
         sbb = blur(b * b) - mu_b**2
