@@ -208,3 +208,38 @@ def test_a_subclass_that_overrides_read_is_read_through_it():
     reader.fit(attacks.FitContext())
     (reads,) = reader.read_batches([(images, hints)])
     assert sum(map(len, reads)) >= 1 and all(r.text.endswith("!") for per_image in reads for r in per_image)
+
+
+def test_second_pass_reuses_the_first_pass_output_of_a_crop_it_leaves_unchanged(monkeypatch):
+    """EasyOCR re-reads crops read with confidence < 0.1 with their contrast stretched; a crop already at the
+    target contrast reaches the network unchanged and is not recomputed, and every read is still what EasyOCR's
+    own ``recognize`` reads crop by crop."""
+    import easyocr.recognition
+
+    monkeypatch.setattr(plate_ocr, "FEATURE_BACKEND", "torch")
+    ocr = load_easyocr(False)
+    rng = np.random.default_rng(0)
+    blocks = np.kron(rng.integers(0, 2, (6, 24)), np.ones((4, 4))) * 255
+    hard = np.repeat(blocks[..., None], 3, axis=2).astype(np.uint8)  # black and white, no text: full contrast
+    noise = rng.integers(0, 256, (24, 96, 3), dtype=np.uint8)
+    dim = (96 + noise // 4).astype(np.uint8)                         # grey noise: stretched in the second pass
+    crops = [hard, dim]
+    rows = {i: plate_ocr.prepare_crop(c) for i, c in enumerate(crops)}
+    # The premise: both are re-read, and only the dim one is changed by the contrast stretch.
+    assert [easyocr.recognition.contrast_grey(r)[0] >= 0.5 for r in rows.values()] == [True, False]
+    instances = []
+
+    class Counting(plate_ocr.SharedFeatures):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            instances.append(self)
+
+    monkeypatch.setattr(plate_ocr, "SharedFeatures", Counting)
+    read = plate_ocr.recognize_rows(ocr, rows)
+    alone = recognize_one_at_a_time(ocr, crops)
+    assert [read[i][0] for i in rows] == [r.raw for r in alone]
+    np.testing.assert_allclose([read[i][1] for i in rows], [r.score for r in alone], rtol=0,
+                               atol=CONVOLUTION_ROUNDING)
+    assert all(score < 0.1 for _, score in read.values())  # both went through the second pass
+    (features,) = instances
+    assert (features.rows_recomputed, features.rows_remembered) == (3, 1)  # 2 first pass + the dim one stretched
