@@ -165,8 +165,7 @@ class SharedFeatures(torch.nn.Module):
         super().__init__()
         self.model = model
         self.features = feature_extractor(model, backend)  # the convolutions; "onnx": ONNX Runtime (CPU)
-        self.seen: dict[str, torch.Tensor] = {}  # input row's content -> its output row
-        self.rows_recomputed = 0
+        self.seen: dict[str, torch.Tensor] = {}  # input row's content -> its output row (one per row computed)
         self.rows_remembered = 0
 
     def forward(self, image: torch.Tensor, text: torch.Tensor | None = None) -> torch.Tensor:
@@ -183,7 +182,6 @@ class SharedFeatures(torch.nn.Module):
                 for key, one in zip(new, features.split(1)):
                     sequence = m.AdaptiveAvgPool(one.permute(0, 3, 1, 2)).squeeze(3)
                     self.seen[key] = m.Prediction(m.SequenceModeling(sequence).contiguous())
-        self.rows_recomputed += len(new)
         self.rows_remembered += len(keys) - len(new)
         return torch.cat([self.seen[key] for key in keys])
 

@@ -242,4 +242,4 @@ def test_second_pass_reuses_the_first_pass_output_of_a_crop_it_leaves_unchanged(
                                atol=CONVOLUTION_ROUNDING)
     assert all(score < 0.1 for _, score in read.values())  # both went through the second pass
     (features,) = instances
-    assert (features.rows_recomputed, features.rows_remembered) == (3, 1)  # 2 first pass + the dim one stretched
+    assert (len(features.seen), features.rows_remembered) == (3, 1)  # 2 first pass + the dim one stretched
