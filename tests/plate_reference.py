@@ -50,11 +50,17 @@ def plate_crop_rows(frames: int) -> dict[int, np.ndarray]:
     rows: dict[int, np.ndarray] = {}
     for im in (images, torch.nn.functional.avg_pool2d(images, 5, 1, 2, count_include_pad=False)):
         reader.read(im, hints)
-        rgb = (im.clamp(0, 1) * 255).round().byte().permute(0, 2, 3, 1).numpy()
-        for image, trace in zip(rgb, reader.last_trace):
-            for _, (x0, y0, x1, y1) in trace.plates:
-                rows[len(rows)] = plate_ocr.prepare_crop(image[y0:y1, x0:x1])
+        for crop in plate_crops(reader, im):
+            rows[len(rows)] = plate_ocr.prepare_crop(crop)
     return rows
+
+
+def plate_crops(reader, images):
+    """The (h, w, 3) uint8 plate crops ``reader`` found in its last ``read`` of ``images``, image by image."""
+    rgb = (images.clamp(0, 1) * 255).round().byte().permute(0, 2, 3, 1).numpy()
+    for image, trace in zip(rgb, reader.last_trace):
+        for _, (x0, y0, x1, y1) in trace.plates:
+            yield image[y0:y1, x0:x1]
 
 
 def assert_backends_read_alike(reference: dict[int, tuple[str, float]], other: dict[int, tuple[str, float]]) -> None:

@@ -14,7 +14,7 @@ from attacks.plates import ocr as plate_ocr
 from attacks.plates.easyocr_models import load_easyocr
 from attacks.plates.memo import forgetting
 from benchmark.scenes import load_scenes
-from plate_reference import recognize_one_at_a_time  # tests/plate_reference.py
+from plate_reference import plate_crops, recognize_one_at_a_time  # tests/plate_reference.py
 
 
 def _scenes(size: tuple[int, int], n: int):
@@ -63,7 +63,7 @@ def test_crops_of_several_widths_are_grouped_and_read_like_alone(monkeypatch):
     images, hints = _scenes((512, 1024), 2)
     reader = attacks.load("lpdr-oracle")
     reader.read(images, hints)
-    crops = [c for c in _plate_crops(reader, images)]
+    crops = list(plate_crops(reader, images))
     crops.append(rng.integers(0, 255, (20, 90, 3), dtype=np.uint8))  # noise: read with low confidence
     crops.append(np.zeros((0, 4, 3), np.uint8))                       # empty: reads ""
     widths = {plate_ocr.padded_width(plate_ocr.prepare_crop(c)) for c in crops if c.size}
@@ -71,13 +71,6 @@ def test_crops_of_several_widths_are_grouped_and_read_like_alone(monkeypatch):
     batched, alone = plate_ocr.read_plates(ocr, crops, "LLDDDLL"), recognize_one_at_a_time(ocr, crops, "LLDDDLL")
     assert [r.raw for r in batched] == [r.raw for r in alone]
     np.testing.assert_allclose([r.score for r in batched], [r.score for r in alone], rtol=0, atol=CONVOLUTION_ROUNDING)
-
-
-def _plate_crops(reader, images):
-    rgb = (images.clamp(0, 1) * 255).round().byte().permute(0, 2, 3, 1).numpy()
-    for image, trace in zip(rgb, reader.last_trace):
-        for _, (x0, y0, x1, y1) in trace.plates:
-            yield image[y0:y1, x0:x1]
 
 
 def test_shared_features_equal_the_recognizer_crop_by_crop():
