@@ -311,9 +311,14 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
     out.described[attacker.name] = attacker.describe()
     if kind == "reference":
         out.references.add(attacker.name)
+    # What each stage frees goes back to the system before the next (see native_memory): glibc
+    # would otherwise hold it, and a restorer's step would add up its stages' transients.
+    release_free_memory()
     metrics, per_image = restoration_metrics(restored, target.sharp)
+    release_free_memory()
     for reader in readers:
         read_chain(target, reader, attacker.name, restored if target.plates is None else windows, cfg, rows, out)
+        release_free_memory()
     del restored
     if target.plates is not None:
         out.restored_plates[attacker.name] = {i: windows[i] for i in gallery_windows(target.plates)}

@@ -19,7 +19,12 @@ largest block freed, up to 32 MB), so the process's resident size only ever grow
 ``release_free_memory`` hands the free heap back (``malloc_trim``): after 8 quick NAFNet training
 steps and restoring 17 frames and windows through ONNX Runtime, deleting everything left the process
 at 1.72 GB and trimming brought it to 0.93 GB (from 0.84 GB at the start; 2026-11-27). The runner
-calls it after each task and the evaluation after each restorer.
+calls it after each task, the evaluation after each stage of a restorer (its restore, its PSNR/SSIM,
+each read chain): a fresh quick gp run, trimmed only between restorers, reached 8.1-8.4 GiB resident
+at the end of each restorer's step while only 5.3-5.9 GB was in use (traced with ``mallinfo2``).
+A fixed mmap threshold (``M_MMAP_THRESHOLD`` 4 MiB, so that freed tensors unmap at once) was the
+other way; it made a quick NAFNet's inference 8 % and its training steps 50-75 % slower (page faults
+on every large tensor), so it is not used.
 """
 
 from __future__ import annotations
