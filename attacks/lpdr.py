@@ -106,13 +106,13 @@ class PlateReaderBase(Reader):
     def fit(self, ctx: FitContext) -> None:
         """Load EasyOCR (offline, once per process); nothing is trained."""
         self.gpu = ctx.device.startswith("cuda")
-        self._ocr = load_easyocr(self.gpu)
+        self._ocr = load_easyocr(self.gpu, detector=self.plate_detector == "craft")
 
     @property
     def ocr(self) -> Any:
         """The shared ``easyocr.Reader``, loaded on first use."""
         if self._ocr is None:
-            self._ocr = load_easyocr(self.gpu)
+            self._ocr = load_easyocr(self.gpu, detector=self.plate_detector == "craft")
         return self._ocr
 
     def describe(self) -> dict[str, Any]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import socket
+import sys
 
 import numpy as np
 import pytest
@@ -55,6 +56,28 @@ def test_network_is_refused_and_easyocr_loads_offline():
     reader = attacks.load("lpdr-oracle")
     reader.fit(attacks.FitContext())
     assert reader.ocr is easyocr_models.load_easyocr(False)  # one shared copy, loaded once
+
+
+def test_only_the_craft_reader_needs_the_craft_weights(tmp_path, monkeypatch):
+    """The default readers find plates with OpenCV: they load EasyOCR without CRAFT (83 MB of
+    weights), and work from a model folder that lacks its file; lpdr-craft names the missing file."""
+    package = tmp_path / "easyocr_en_models"
+    (package / "models").mkdir(parents=True)
+    (package / "__init__.py").write_text("")
+    real = easyocr_models.model_dir()
+    (package / "models" / easyocr_models.RECOGNIZER_FILE).symlink_to(real / easyocr_models.RECOGNIZER_FILE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "easyocr_en_models", raising=False)
+    easyocr_models.load_easyocr.cache_clear()
+    try:
+        reader = attacks.load("lpdr-oracle")
+        reader.fit(attacks.FitContext())
+        assert not hasattr(reader.ocr, "detector")  # EasyOCR built no CRAFT network
+        assert reader.ocr.model_storage_directory == str(package / "models")
+        with pytest.raises(FileNotFoundError, match=easyocr_models.DETECTOR_FILE):
+            attacks.load("lpdr-craft").fit(attacks.FitContext())
+    finally:
+        easyocr_models.load_easyocr.cache_clear()  # the others load from the real package again
 
 
 @pytest.mark.parametrize("detector", ["craft", "opencv"])

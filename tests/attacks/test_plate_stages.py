@@ -26,7 +26,7 @@ def _no_network(*args, **kwargs):
 def ocr():
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(socket.socket, "connect", _no_network)
-        yield load_easyocr()
+        yield load_easyocr(detector=True)
 
 
 def vehicle_with_plate(plate_w: int = 90, at_border: bool = False) -> tuple[np.ndarray, tuple[int, int, int, int]]:
