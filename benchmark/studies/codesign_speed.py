@@ -54,7 +54,7 @@ def time_codesign_steps(profile_name: str = "paper", device: str = "cpu", steps:
     marks: list[float] = []
 
     def untrained_utility(p: Any, seed: int, dev: str, *args: Any, **kwargs: Any) -> torch.nn.Module:
-        return build_segformer(p.utility_model).to(dev)
+        return build_segformer(p.utility_model).to(dev)  # type: ignore[arg-type]
 
     def untrained_adversary(lens: Any, sampler: Any, p: Any, seed: int, dev: str, *args: Any,
                             **kwargs: Any) -> tuple[torch.nn.Module, dict]:
