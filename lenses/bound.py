@@ -155,7 +155,7 @@ def noise_to_signal(lens: torch.nn.Module, radiance: tuple[float, ...] | torch.T
     """
     if frames < 1:
         raise ValueError(f"frames must be >= 1, got {frames}")
-    e = lens.sensor.electrons_per_unit().to(torch.float64)
+    e = lens.sensor.electrons_per_unit().to("cpu", torch.float64)  # the bound's arithmetic runs on the CPU
     level = torch.as_tensor(radiance, dtype=torch.float64)
     if level.shape != (3,) or bool((level < 0).any()):
         raise ValueError(f"operating radiance must be 3 non-negative values (R, G, B), got {level.tolist()}")
@@ -371,7 +371,7 @@ def bound_curve(lens: torch.nn.Module, spectrum: PlateSpectrum, widths_px: list[
     """B and the Fano ceiling per plate width, for the chart: {"width_px", "bits", "ceiling"} arrays."""
     nsr = noise_to_signal(lens, spectrum.noise_radiance(), frames)
     with torch.no_grad():
-        psf = lens.psf()
+        psf = lens.psf().cpu()  # float64 matrices of plate size: CPU work on any lens device
         bits = np.array([float(plate_bits(psf, spectrum, int(w), nsr)) for w in widths_px])
     return {"width_px": np.asarray(widths_px, dtype=int), "bits": bits,
             "ceiling": np.minimum(1.0, (bits + 1.0) / entropy_bits)}
@@ -393,7 +393,7 @@ def bound_row(lens: torch.nn.Module, spectrum: PlateSpectrum, entropy_bits: floa
     row.update({f"bound_noise_radiance_{c}": float(v) for c, v in zip("rgb", spectrum.noise_radiance())})
     traces: dict[int, torch.Tensor] = {}  # tr(Sigma G) per width, shared by the W_eps search of every T
     with torch.no_grad():
-        psf = lens.psf()
+        psf = lens.psf().cpu()  # float64 matrices of plate size: CPU work on any lens device
         for t in frames:
             nsr = noise_to_signal(lens, spectrum.noise_radiance(), t)
             for w in widths_px:

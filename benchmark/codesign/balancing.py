@@ -200,7 +200,7 @@ class InformationBound(Balance):
         spectrum, entropy_bits = self._spectrum, self._entropy_bits  # type: ignore[attr-defined]
         g_seg = ctx.mean_gradient(ctx.utility_loss)
         nsr = noise_to_signal(ctx.lens, spectrum.mean_radiance)
-        bits = plate_bits(ctx.lens.psf(), spectrum, self.width_px, nsr)
+        bits = plate_bits(ctx.lens.psf().cpu(), spectrum, self.width_px, nsr)  # the bound runs on the CPU; .cpu() keeps the gradient
         ceiling = (bits + 1.0) / entropy_bits
         g_bound = ctx.gradient(torch.relu(ceiling - self.eps))  # the bound is the same on every replica
         stats = {"grad_seg_norm": _norm(g_seg), "grad_bound_norm": _norm(g_bound), "bits": float(bits.detach()),

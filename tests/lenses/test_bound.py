@@ -202,3 +202,15 @@ def test_noise_is_set_at_the_least_plate_radiance_never_the_mean():
     unmeasured = smooth_spectrum()
     assert unmeasured.noise_radiance() == (0.0, 0.0, 0.0)
     assert bound_curve(cam, unmeasured, [16], ENTROPY)["bits"][0] > at_least
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_row_of_a_lens_on_cuda_equals_the_cpu_row():
+    """The bound's float64 matrices are CPU work whatever device the lens runs on (a `run --device cuda`
+    once stopped in the bound task on mixed devices)."""
+    spectrum = smooth_spectrum()
+    on_cpu = bound_row(lens(3.0), spectrum, ENTROPY, widths_px=(8, 16), frames=(1, 5))
+    on_cuda = bound_row(lens(3.0).cuda(), spectrum, ENTROPY, widths_px=(8, 16), frames=(1, 5))
+    assert on_cuda.keys() == on_cpu.keys()
+    for key, value in on_cpu.items():
+        assert on_cuda[key] == (pytest.approx(value, rel=1e-6) if isinstance(value, float) else value), key
