@@ -39,7 +39,8 @@ def _normalise(x: torch.Tensor, eps: float) -> torch.Tensor:
 def _conv(weight: torch.Tensor, bias: torch.Tensor, padding: int = 0, groups: int = 1) -> nn.Conv2d:
     """A Conv2d holding ``weight`` (out, in/groups, k, k) and ``bias`` (out,)."""
     out_ch, in_per_group, k, _ = weight.shape
-    conv = nn.Conv2d(in_per_group * groups, out_ch, kernel_size=k, padding=padding, groups=groups)
+    conv = nn.Conv2d(in_per_group * groups, out_ch, kernel_size=k, padding=padding, groups=groups,
+                     device=weight.device, dtype=weight.dtype)  # where the network lives (a GPU, say)
     with torch.no_grad():
         conv.weight.copy_(weight)
         conv.bias = nn.Parameter(bias.detach().clone())

@@ -57,3 +57,12 @@ def test_folded_quick_nafnet_through_onnx_runtime_matches_the_torch_original():
         want = model(x)
     got = InferenceEngine(fold_for_inference(model), "onnx")(x)
     assert torch.allclose(got, want, atol=1e-4, rtol=0), float((got - want).abs().max())
+
+
+def test_folded_network_stays_on_the_networks_device():
+    """Folding builds new convolutions: they must live where the network does (a NAFNet on a GPU once
+    folded into CPU weights and failed at restore). The meta device stands in for a GPU here."""
+    net = NAFNet(3, 8, 1, (1,), (1,)).to("meta")
+    folded = fold_for_inference(net)
+    assert {p.device.type for p in folded.parameters()} == {"meta"}
+    assert {p.dtype for p in folded.parameters()} == {torch.float32}
