@@ -119,6 +119,8 @@ class RunProfiler:
             with sampler:
                 yield
         finally:
+            if cuda:
+                torch.cuda.synchronize()  # the task's queued kernels belong to its seconds
             profile.disable()
             seconds = time.perf_counter() - t0
             python_peak_mib = tracemalloc.get_traced_memory()[1] / 2**20 if self.trace_python else None
@@ -274,9 +276,16 @@ def stage_table(profile: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n\nStages nest (reading includes segmentation), so shares need not add up to 100 %.\n"
 
 
+ASYNC_NOTE = ("On a GPU, kernels run asynchronously: a stage's seconds (and images/s) count the time the host "
+              "spends in it, and a kernel's time falls in the stage that waits for its result (a copy to the CPU, "
+              "say). Task seconds are exact: each task waits for its kernels before it is timed.\n")
+
+
 def render_markdown(profile: dict[str, Any]) -> str:
     """profile.md: the cost table, the stage table, then per task its stages and top functions."""
     parts = ["# Where the time went\n", "## Tasks\n", cost_table(profile), "## Stages\n", stage_table(profile)]
+    if str(profile.get("device", "cpu")).startswith("cuda"):
+        parts.append(ASYNC_NOTE)
     for t in sorted(profile["tasks"], key=lambda t: -t["seconds"]):
         parts.append(f"## {t['key']} ({t['seconds']:.1f} s, {t['share']:.1%})\n")
         python = (f"Python/NumPy peak {t['python_peak_mib']:.0f} MiB" if t.get("python_peak_mib") is not None

@@ -87,6 +87,9 @@ def test_the_profile_lists_every_computed_task_with_its_stages(two_runs):
     markdown = (out / "profile.md").read_text()
     assert profiling.cost_table(profile) in markdown and "| evaluate | defocus | 1 |" in markdown
     assert profiler.tasks == profile["tasks"]
+    # A CPU run's stage seconds are what they say; a GPU run's are host time, and the page says so.
+    assert profile["device"] == "cpu" and profiling.ASYNC_NOTE not in markdown
+    assert profiling.ASYNC_NOTE in profiling.render_markdown({**profile, "device": "cuda:0"})
 
 
 def test_profiling_refuses_ray_and_does_nothing_when_off(tmp_path):
