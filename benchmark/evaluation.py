@@ -299,30 +299,37 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
         out.rows.append(rows.failed(kind, attacker.name, restored, restorer=attacker.name, settings=settings))
         return
     run_s = time.perf_counter() - t0
-    if target.plates is not None:
-        windows = attempt(attacker.name, "restore", lambda: restore_windows(
-            attacker, target.plates.sensor, cfg.profile.batch_size, cfg.device))  # type: ignore[union-attr]
-        if isinstance(windows, RowError):
-            out.rows.append(rows.failed(kind, attacker.name, windows, restorer=attacker.name, settings=settings))
-            return
-    # Of the scenes only the sample picture's first one is kept (every restorer's 64 full scenes
-    # would hold gigabytes); a clone, as a slice would keep the whole batch's storage alive.
-    out.restored[attacker.name] = restored if target.plates is None else restored[:1].clone()
-    out.described[attacker.name] = attacker.describe()
-    if kind == "reference":
-        out.references.add(attacker.name)
     # What each stage frees goes back to the system before the next (see native_memory): glibc
     # would otherwise hold it, and a restorer's step would add up its stages' transients.
     release_free_memory()
     metrics, per_image = restoration_metrics(restored, target.sharp)
     release_free_memory()
+    images: torch.Tensor | list[torch.Tensor]
+    if target.plates is None:
+        images = restored
+    else:
+        # Of the scenes only the sample picture's first one is kept (every restorer's 64 full scenes
+        # would hold gigabytes); a clone, as a slice would keep the whole batch's storage alive.
+        # Scored already, the frames go before the windows are restored and read.
+        restored = restored[:1].clone()
+        release_free_memory()
+        windows = attempt(attacker.name, "restore", lambda: restore_windows(
+            attacker, target.plates.sensor, cfg.profile.batch_size, cfg.device))  # type: ignore[union-attr]
+        if isinstance(windows, RowError):
+            out.rows.append(rows.failed(kind, attacker.name, windows, restorer=attacker.name, settings=settings))
+            return
+        images = windows
+    out.restored[attacker.name] = restored
+    out.described[attacker.name] = attacker.describe()
+    if kind == "reference":
+        out.references.add(attacker.name)
     for reader in readers:
-        read_chain(target, reader, attacker.name, restored if target.plates is None else windows, cfg, rows, out)
+        read_chain(target, reader, attacker.name, images, cfg, rows, out)
         release_free_memory()
     del restored
     if target.plates is not None:
-        out.restored_plates[attacker.name] = {i: windows[i] for i in gallery_windows(target.plates)}
-        del windows
+        out.restored_plates[attacker.name] = {i: images[i] for i in gallery_windows(target.plates)}
+    del images
     metrics.update({"fit_s": float(fit_s), "images_per_s": target.sharp.shape[0] / run_s})
     row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
                    threat_model=attacker.threat_model.value, settings={"restorer": attacker.describe()})

@@ -102,3 +102,41 @@ def test_plate_windows_are_restored_a_pixel_budget_at_a_time_in_order():
     assert len(out) == len(windows)
     for got, want in zip(out, windows):
         torch.testing.assert_close(got, want.flip(-1), rtol=0, atol=0)
+
+
+class _FrameCounter(attacks.Restorer):
+    """Flips its input; when given the plate windows, counts the live tensors shaped like the whole
+    restored frame batch."""
+    name = "frame-counter"
+    threat_model = attacks.ThreatModel.SENSOR_ACCESS
+
+    def __init__(self, frames_shape: tuple[int, ...]) -> None:
+        super().__init__()
+        self.frames_shape = frames_shape
+        self.alive_during_windows: list[int] = []
+
+    def restore(self, sensor: torch.Tensor) -> torch.Tensor:
+        if sensor.shape[-2:] != self.frames_shape[-2:]:
+            import gc
+            gc.collect()
+            self.alive_during_windows.append(sum(
+                1 for o in gc.get_objects() if isinstance(o, torch.Tensor) and tuple(o.shape) == self.frames_shape))
+        return sensor.flip(-1)
+
+
+def test_scored_frames_are_gone_before_the_windows_are_restored():
+    """A restorer's 64 restored frames (about 400 MB on quick) are scored first and dropped (but the
+    sample picture's one) before its plate windows are restored and read."""
+    cfg = RunConfig(["fake"], None, "synthetic", get_profile("smoke"), [0])
+    scenes = load_scenes("synthetic", "val", 3, (64, 128), 0)
+    sensor = to_tensor(scenes)
+    windows = [sensor[0, :, :32, :48].clone(), sensor[1, :, 8:40, 16:80].clone()]
+    plates = PlateSet(scenes=scenes[:2], sharp=windows, sensor=windows, n_frames=2)
+    target = Target("fake", scenes, sensor.clone(), sensor.clone(), attacks.FitContext(), None, None, plates=plates)
+    counter = _FrameCounter(tuple(sensor.shape))
+    out = Attacked()
+    run_restorers(target, [counter], {}, cfg, RowBuilder(cfg, "fake", 0, {"lens": "fake"}, {"device": "cpu"}), out)
+    assert counter.alive_during_windows, "the windows were restored"
+    # alive: the local `sensor`, the target's sensor and sharp scenes; not the restored batch
+    assert set(counter.alive_during_windows) == {3}
+    assert out.rows[-1].metrics["n_images"] == 3 and out.restored["frame-counter"].shape[0] == 1
