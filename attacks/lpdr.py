@@ -106,11 +106,12 @@ class PlateReaderBase(Reader):
     def fit(self, ctx: FitContext) -> None:
         """Load EasyOCR (offline, once per process); nothing is trained."""
         self.gpu = ctx.device.startswith("cuda")
-        self._ocr = load_easyocr(self.gpu, detector=self.plate_detector == "craft")
+        self._ocr = None
+        self._ocr = self.ocr
 
     @property
     def ocr(self) -> Any:
-        """The shared ``easyocr.Reader``, loaded on first use."""
+        """The shared ``easyocr.Reader`` (CRAFT only for the craft plate detector), loaded on first use."""
         if self._ocr is None:
             self._ocr = load_easyocr(self.gpu, detector=self.plate_detector == "craft")
         return self._ocr
