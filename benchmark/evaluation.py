@@ -303,16 +303,14 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
     # would otherwise hold it, and a restorer's step would add up its stages' transients.
     release_free_memory()
     metrics, per_image = restoration_metrics(restored, target.sharp)
-    release_free_memory()
-    images: torch.Tensor | list[torch.Tensor]
-    if target.plates is None:
-        images = restored
-    else:
+    if target.plates is not None:
         # Of the scenes only the sample picture's first one is kept (every restorer's 64 full scenes
         # would hold gigabytes); a clone, as a slice would keep the whole batch's storage alive.
         # Scored already, the frames go before the windows are restored and read.
         restored = restored[:1].clone()
-        release_free_memory()
+    release_free_memory()
+    images: torch.Tensor | list[torch.Tensor] = restored
+    if target.plates is not None:
         windows = attempt(attacker.name, "restore", lambda: restore_windows(
             attacker, target.plates.sensor, cfg.profile.batch_size, cfg.device))  # type: ignore[union-attr]
         if isinstance(windows, RowError):
