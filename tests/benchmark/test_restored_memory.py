@@ -5,6 +5,7 @@ of every restorer alive (about 400 MB each on quick): a fresh quick run was kill
 
 from __future__ import annotations
 
+import gc
 import weakref
 
 import torch
@@ -117,7 +118,6 @@ class _FrameCounter(attacks.Restorer):
 
     def restore(self, sensor: torch.Tensor) -> torch.Tensor:
         if sensor.shape[-2:] != self.frames_shape[-2:]:
-            import gc
             gc.collect()
             self.alive_during_windows.append(sum(
                 1 for o in gc.get_objects() if isinstance(o, torch.Tensor) and tuple(o.shape) == self.frames_shape))
