@@ -88,8 +88,7 @@ def time_codesign_steps(profile_name: str = "paper", device: str = "cpu", steps:
         "crops_per_s": base.batch_size / median,
         **({"torch_cuda_peak_mib": torch.cuda.max_memory_allocated(torch.device(device)) / 2**20} if cuda else {}),
         "initial_coefficients_um": [float(c) for c in start_um], "final_coefficients_um": [float(c) for c in final_um],
-        "threads": torch.get_num_threads(),
-        "provenance": provenance(device),
+        "provenance": provenance(device),  # with the torch threads
     }
 
 
