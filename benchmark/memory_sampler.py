@@ -88,6 +88,7 @@ class PeakSampler:
         self.start_mib: float | None = None
         self.peak_mib: float | None = None
         self.peak_stack: list[tuple[str, int, str]] = []
+        self._stack_mib: float | None = None  # the sample the peak's stack was taken at
         self.group_peaks_mib: dict[str, float] = {}
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -121,13 +122,15 @@ class PeakSampler:
             return
         stack = _common_prefix(before, self._stack())
         self.samples += 1
-        # The peak's stack moves only when a sample beats it by DRIFT_MIB: allocator drift later on
-        # must not take it away from the code that set the peak (at 1 MiB, a clean-clone CI run once
-        # saw the injected 256 MiB peak's stack move to the function that ran after the block was freed).
-        if self.peak_mib is None or rss > self.peak_mib + DRIFT_MIB:
-            self.peak_stack = stack
+        # A new peak moves the peak's stack only once it is DRIFT_MIB above the sample the stack was
+        # taken at: allocator drift later on must not take the stack away from the code that set the
+        # peak (at 1 MiB, a clean-clone CI run saw the injected 256 MiB peak's stack move to the
+        # function that ran after the block was freed). Measured from the stack's own sample, not from
+        # the running peak, so that a block paged in a few MiB per sample still moves it.
         if self.peak_mib is None or rss > self.peak_mib:
             self.peak_mib = rss
+            if self._stack_mib is None or rss > self._stack_mib + DRIFT_MIB:
+                self.peak_stack, self._stack_mib = stack, rss
         on_stack = {(f, name) for f, _, name in stack}
         for group, functions in self.groups.items():
             if any(name == fn and f.endswith(suffix) for f, name in on_stack for suffix, fn in functions):
@@ -135,8 +138,13 @@ class PeakSampler:
                     self.group_peaks_mib[group] = rss
 
     def _stack(self) -> list[tuple[str, int, str]]:
-        frames = sys._current_frames()  # noqa: SLF001  # the documented way to see another thread's stack
-        return _stack(frames.get(self.thread_id) if self.thread_id is not None else None)
+        if self.thread_id is None:
+            return []
+        # The dict of frames must not be bound to a local: it holds this very frame, whose locals would
+        # then hold the dict, a cycle that keeps every sampled frame, and so the locals of functions that
+        # have returned meanwhile (a task's big arrays), alive until the next garbage collection.
+        frame = sys._current_frames().get(self.thread_id)  # noqa: SLF001  # the documented way to see another thread's stack
+        return _stack(frame)
 
     def summary(self, frames: int = 12) -> dict[str, Any]:
         """The sampled peak, the start, the deepest `frames` of our own frames at the peak, and the group peaks."""

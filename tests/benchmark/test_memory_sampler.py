@@ -6,7 +6,10 @@ rise by about that much, its stack must end in that function, and only the group
 
 from __future__ import annotations
 
+import gc
+import mmap
 import time
+import weakref
 
 import numpy as np
 import pytest
@@ -51,6 +54,54 @@ def test_the_peak_and_its_stack_point_at_the_allocating_function():
     # after_work: the kernel's resident count can lag a freed block by a few milliseconds.)
     assert summary["group_peaks_mib"]["small"] < summary["peak_mib"] - 0.5 * HOG_MIB
     assert "absent" not in summary["group_peaks_mib"]
+
+
+RAMP_MIB, RAMP_STEP_MIB = 128, 4
+
+
+def page_in_slowly() -> None:
+    """A fresh anonymous block paged in a few MiB at a time: no sample beats the last by DRIFT_MIB."""
+    block = mmap.mmap(-1, RAMP_MIB * 2**20)
+    view = np.frombuffer(block, dtype=np.uint8)
+    step = RAMP_STEP_MIB * 2**20
+    for start in range(0, view.size, step):
+        view[start:start + step:4096] = 1  # one write per page
+        time.sleep(0.01)
+    time.sleep(0.1)
+    del view
+    block.close()
+
+
+def test_a_peak_paged_in_slowly_still_takes_the_stack():
+    """A CI run at DRIFT_MIB = 16 measured from the running peak: the 256 MiB block paged in about
+    6 MiB per sample, so the stack stayed on the function before it."""
+    assert RAMP_STEP_MIB < memory_sampler.DRIFT_MIB
+    with PeakSampler({}, interval=0.01) as sampler:
+        small_work()
+        page_in_slowly()
+        after_work()
+    assert sampler.peak_mib - sampler.start_mib >= 0.8 * RAMP_MIB
+    assert "page_in_slowly" in [name for _, _, name in sampler.peak_stack[-2:]]
+
+
+def test_sampling_does_not_keep_a_returned_function_s_locals_alive():
+    """Sampling a stack must not keep its frames, and so their arrays, alive past their function's
+    return: the sampler's dict of frames once made a reference cycle that held them until the next
+    garbage collection (the 256 MiB block was still resident when the next test started)."""
+    def hold(refs: list) -> None:
+        block = np.ones(1024)
+        refs.append(weakref.ref(block))
+        time.sleep(0.2)  # sampled many times while alive
+
+    refs: list = []
+    gc.disable()  # only reference counting may free the block
+    try:
+        with PeakSampler({}, interval=0.005) as sampler:
+            hold(refs)
+            assert refs[0]() is None
+    finally:
+        gc.enable()
+    assert sampler.samples >= 10
 
 
 def test_current_rss_tracks_an_allocation():
