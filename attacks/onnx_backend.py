@@ -77,9 +77,12 @@ class OnnxModel:
         onnx_bytes: Model from ``export_onnx``.
         threads: Intra-op threads; None uses torch's thread count, so both backends compete
             on equal terms.
+        shrink_arena: Give the CPU arena's memory back at the end of every run (see below). False
+            keeps it for the next run: for a network whose inputs are bounded (SegFormer's sliding
+            windows), where re-faulting the arena every run costs more than the memory it holds.
     """
 
-    def __init__(self, onnx_bytes: bytes, threads: int | None = None) -> None:
+    def __init__(self, onnx_bytes: bytes, threads: int | None = None, shrink_arena: bool = True) -> None:
         import onnxruntime as ort
 
         options = ort.SessionOptions()
@@ -95,7 +98,8 @@ class OnnxModel:
         # back, so a run holding several restorers' sessions does not keep each one's peak (a fresh
         # quick run once reached 24 GB with the arena kept): 0.8 GB resident after the call either way.
         self._run_options = ort.RunOptions()
-        self._run_options.add_run_config_entry("memory.enable_memory_arena_shrinkage", "cpu:0")
+        if shrink_arena:
+            self._run_options.add_run_config_entry("memory.enable_memory_arena_shrinkage", "cpu:0")
 
     def __call__(self, x: Tensor) -> Tensor:
         """(B, C, H, W) float32 -> (B, C', H, W) float32 on ``x``'s device."""
@@ -125,6 +129,7 @@ class InferenceEngine:
             one), which bounds peak memory at full resolution.
         fallback: With backend "onnx": if the model is not on the CPU or the export fails, use torch
             (logging why) instead of raising. "auto" always falls back.
+        shrink_arena: ``OnnxModel``'s: give ONNX Runtime's arena back after every run (default).
 
     Attributes:
         backend: The backend in use, "torch" or "onnx" ("auto" until the first call decides).
@@ -134,7 +139,7 @@ class InferenceEngine:
 
     def __init__(self, model: nn.Module, backend: str = "auto", export_hw: tuple[int, int] = (64, 64),
                  exporter: Callable[[], bytes] | None = None, batch_pixels: int = DEFAULT_BATCH_PIXELS,
-                 fallback: bool = False) -> None:
+                 fallback: bool = False, shrink_arena: bool = True) -> None:
         check_backend(backend)
         if batch_pixels < 1:
             raise ValueError(f"batch_pixels must be >= 1, got {batch_pixels}")
@@ -153,7 +158,7 @@ class InferenceEngine:
         if backend == "onnx" or (backend == "auto" and on_cpu):
             export = exporter or (lambda: export_onnx(self.model, torch.rand(1, _channels(model), *export_hw)))
             try:
-                self._onnx = OnnxModel(export())
+                self._onnx = OnnxModel(export(), shrink_arena=shrink_arena)
             except Exception as exc:  # noqa: BLE001 - fall back to the always-available path
                 if backend == "onnx" and not fallback:
                     raise

@@ -14,10 +14,11 @@ import time
 
 import torch
 
+from attacks.onnx_backend import OnnxModel, export_onnx
 from benchmark.profiles import PROFILES
 from benchmark.utility.clean import load_verified, shipped_for
 from benchmark.utility.scoring import predict, window_for
-from benchmark.utility.segformer_onnx import segformer_engine
+from benchmark.utility.segformer_onnx import FoldedSegformerLogits, segformer_engine
 
 ROUNDS = 3
 THREADS = 2
@@ -55,3 +56,41 @@ def test_segformer_b0_sliding_window_torch_vs_onnx(benchmark, tmp_path):
                                  "onnx_speedup": speedup, "threads": THREADS, "window": list(window)})
     assert torch.equal(preds["onnx"], preds["torch"])
     assert speedup > 1.0, f"ONNX Runtime {speedup:.2f}x torch on SegFormer-B0 windows; use torch on this machine"
+
+
+def test_segformer_engine_keeps_its_arena_between_runs(benchmark, tmp_path):
+    """The engine's ONNX Runtime session keeps its memory arena from run to run (segformer_engine):
+    against a session that gives it back after every run (as the restorers' do), on the quick batch
+    of 8 full 512 x 1024 scenes (15 window batches each), alternating rounds. Target: kept <= 0.9x
+    the time of given back, with equal predictions."""
+
+    profile = PROFILES["quick"]
+    weights = shipped_for(profile)
+    assert weights is not None, "no shipped quick SegFormer weights"
+    net = load_verified(weights, profile.utility_model)
+    window, stride = window_for(profile.image_size, profile.train_crop)
+    images = torch.rand(profile.batch_size, 3, *profile.image_size, generator=torch.Generator().manual_seed(0))
+    threads = torch.get_num_threads()
+    torch.set_num_threads(THREADS)
+    try:
+        kept = segformer_engine(net, tmp_path, window)
+        assert kept.backend == "onnx"
+        given_back = OnnxModel(export_onnx(FoldedSegformerLogits(net).eval(), torch.rand(1, 3, *window)),
+                               shrink_arena=True)
+        runs = {"kept": lambda: predict(net, images, window, stride, profile.batch_size, logits=kept),
+                "given_back": lambda: predict(net, images, window, stride, profile.batch_size, logits=given_back)}
+        preds = {name: run() for name, run in runs.items()}  # warm-up
+        seconds: dict[str, list[float]] = {name: [] for name in runs}
+        for _ in range(ROUNDS):
+            for name, run in runs.items():
+                t0 = time.perf_counter()
+                run()
+                seconds[name].append(time.perf_counter() - t0)
+        benchmark.pedantic(runs["kept"], rounds=1, iterations=1, warmup_rounds=0)
+    finally:
+        torch.set_num_threads(threads)
+    ratio = min(seconds["kept"]) / min(seconds["given_back"])
+    benchmark.extra_info.update({"kept_s": min(seconds["kept"]), "given_back_s": min(seconds["given_back"]),
+                                 "ratio_kept_over_given_back": ratio, "threads": THREADS})
+    assert torch.equal(preds["kept"], preds["given_back"])
+    assert ratio <= 0.9, f"keeping the arena took {ratio:.2f}x the time of giving it back after every run"
