@@ -27,7 +27,6 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 import torch
-from safetensors.torch import load as load_safetensors
 from torch import Tensor
 
 from attacks.base import FitContext, Restorer, ThreatModel
@@ -36,13 +35,13 @@ from attacks.gray_world import gray_world_balance
 from attacks.networks.nafnet import NAFNet, load_nafnet_checkpoint
 from attacks.networks.nafnet_folded import fold_for_inference
 from attacks.onnx_backend import InferenceEngine, check_backend
-from attacks.shipped_weights import Shipped, find_shipped
+from attacks.shipped_weights import Shipped
 from attacks.restorer_training import (
     RestorerBudget,
     collect_pairs,
     fingerprint,
-    fit_nafnet,
     random_crops,
+    shipped_or_fit,
 )
 
 __all__ = ["NafnetGeneric"]
@@ -110,14 +109,8 @@ class NafnetGeneric(Restorer):
                 (target,) = random_crops([sharp], budget.batch_size, budget.crop_px, generator)
                 return gray_world_balance(degrade(target, generator)), target
 
-            self.shipped = find_shipped(self.name, key) if self.use_shipped else None
-            if self.shipped is not None:
-                model = budget.build_nafnet()
-                model.load_state_dict(load_safetensors(self.shipped.data), strict=True)
-                self.trained = False
-                log.info("%s: weights shipped with the package (%s)", self.name, self.shipped.path.name)
-            else:
-                model, self.trained = fit_nafnet(budget, ctx, self.name, key, next_batch)
+            model, self.trained, self.shipped = shipped_or_fit(budget, ctx, self.name, key, next_batch,
+                                                              self.use_shipped)
             self.budget = budget
         self.network = model.to(ctx.device).eval()
         self.engine = InferenceEngine(fold_for_inference(self.network), self.backend, fallback=True)

@@ -29,6 +29,7 @@ from torch import Tensor, nn
 from attacks import crops
 from attacks.base import ArtifactStore
 from attacks.networks.nafnet import NAFNet
+from attacks.shipped_weights import Shipped, find_shipped
 
 __all__ = [
     "RestorerBudget",
@@ -38,6 +39,7 @@ __all__ = [
     "load_or_train",
     "negative_psnr",
     "random_crops",
+    "shipped_or_fit",
     "train_restorer",
 ]
 
@@ -239,3 +241,20 @@ def fit_nafnet(budget: RestorerBudget, ctx: Any, kind: str, key: dict[str, Any],
     trained = load_or_train(model, ctx.artifacts, kind, key,
                             lambda m: train_restorer(m, next_batch, budget.steps, ctx.device, ctx.seed))
     return model, trained
+
+
+def shipped_or_fit(budget: RestorerBudget, ctx: Any, kind: str, key: dict[str, Any],
+                   next_batch: Callable[[torch.Generator], tuple[Tensor, Tensor]], use_shipped: bool = True
+                   ) -> tuple[NAFNet, bool, Shipped | None]:
+    """The package's weights shipped for exactly ``key`` (``attacks.shipped_weights``), else ``fit_nafnet``.
+
+    Returns the network, whether it was trained now, and the shipped weights used (None if none).
+    """
+    shipped = find_shipped(kind, key) if use_shipped else None
+    if shipped is None:
+        model, trained = fit_nafnet(budget, ctx, kind, key, next_batch)
+        return model, trained, None
+    model = budget.build_nafnet()
+    model.load_state_dict(load_safetensors(shipped.data), strict=True)
+    log.info("%s: weights shipped with the package (%s)", kind, shipped.path.name)
+    return model, False, shipped

@@ -102,6 +102,14 @@ def build_parser() -> argparse.ArgumentParser:
     ship.add_argument("--profile", default="quick", choices=list(PROFILES), help="budget (default: quick)")
     ship.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     ship.add_argument("--out", type=Path, default=None, help="weights folder (default: the package's attacks/weights)")
+    lens_ship = sub.add_parser("ship-lens", help="co-design (or load from the cache) a lens and ship it, with its "
+                                                 "known-pairs NAFNet, in the package with their provenance")
+    lens_ship.add_argument("lens", choices=_codesign_lenses(), help="co-design scheme registered as a lens")
+    lens_ship.add_argument("--profile", default="quick", choices=list(PROFILES), help="run size (default: quick)")
+    lens_ship.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
+    lens_ship.add_argument("--out", type=Path, default=None,
+                           help="folder to write into instead of the package (the lens there, the attacker's "
+                                "weights in OUT/attack_weights)")
     sub.add_parser("list", help="list registered lenses, attackers and scene sets")
     rep = sub.add_parser("report", help="render leaderboard/README.md and charts from leaderboard/entries/")
     rep.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
@@ -292,6 +300,11 @@ def cmd_pretrain_attacker(args: argparse.Namespace) -> int:
     return ship_main(args=args)
 
 
+def cmd_ship_lens(args: argparse.Namespace) -> int:
+    from benchmark.lens_shipping import main as ship_main
+    return ship_main(args=args)
+
+
 def cmd_pretrain(args: argparse.Namespace) -> int:
     from benchmark.utility.pretrain import main as pretrain_main
     return pretrain_main(args=args)
@@ -312,7 +325,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", force=True)
     commands = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "train": cmd_train, "study": cmd_study,
                 "export-mask": cmd_export_mask, "pretrain": cmd_pretrain,
-                "pretrain-attacker": cmd_pretrain_attacker}
+                "pretrain-attacker": cmd_pretrain_attacker, "ship-lens": cmd_ship_lens}
     try:
         return commands[args.command](*(() if args.command == "list" else (args,)))
     except (ValueError, LookupError, NotImplementedError, FileNotFoundError, DuplicateNameError) as exc:

@@ -50,6 +50,7 @@ from benchmark.codesign.curves import PUBLISHED_FILES, CurveLog
 from benchmark.codesign.data import CropSampler, step_generator
 from benchmark.codesign.replicas import SingleProcess
 from benchmark.codesign.schemes import Scheme
+from benchmark.codesign.shipped import install_shipped
 from benchmark.utility.clean import clean_utility_id, clean_utility_net
 from benchmark.utility.segformer import build_segformer, segment_logits
 from lenses.lens import Lens
@@ -101,7 +102,8 @@ class CoDesign:
     """One training run: a start spec, a scheme, a profile and a seed; cached by their hash."""
 
     def __init__(self, start: LensSpec, scheme: Scheme, profile: Any, seed: int, device: str, cache_dir: Path,
-                 name: str | None = None, scene_set: str = "synthetic", replicas: SingleProcess | None = None):
+                 name: str | None = None, scene_set: str = "synthetic", replicas: SingleProcess | None = None,
+                 use_shipped: bool = True):
         if scheme.optics and not start.mask.trainable:
             raise ValueError(f"scheme {scheme.name!r} trains the optics, but lens spec {start.name!r} declares no "
                              "mask.bounds_um (a trainable mask declares its bounds)")
@@ -131,17 +133,21 @@ class CoDesign:
         self.checkpoint_path = root / f"{self.directory.name}.checkpoint.pt"
         self.live_dir = root / f"{self.directory.name}.live"  # curves while training (see `curves`)
         self.cache_dir = Path(cache_dir)
+        # Install the package's copy of this very run (same folder name, so the same configuration)
+        # when the cache has none (benchmark.codesign.shipped); False always trains.
+        self.use_shipped = use_shipped
 
     # ---- loading -------------------------------------------------------------------------------
     def load(self) -> TrainedLens | None:
-        """The finished run from the cache, or None.
+        """The finished run from the cache (installed first from the package's shipped copy of this run,
+        if there is one and the cache has none: ``benchmark.codesign.shipped``), or None.
 
         Every file of the run folder is checked against its checksum; a run with a missing, corrupt
         or unreadable file is reported (each bad file with its path), removed and read as absent, so
         `load_or_train` trains it again rather than reuse a part of it.
         """
         d = self.directory
-        if not d.is_dir():
+        if not d.is_dir() and not (self.use_shipped and install_shipped(d, self.config)):
             return None
         record = read_json(d / "record.json")
         spec_ok = verified(d / "lens.toml")
