@@ -23,6 +23,7 @@ import json
 import logging
 import os
 import shutil
+import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -101,7 +102,7 @@ def install_shipped(folder: Path, config: Mapping[str, Any], directory: Path | N
                                    f"{digest[:12]}..., its provenance says {expected['bytes']} bytes, "
                                    f"{str(expected['sha256'])[:12]}...; the file is damaged: reinstall the package")
         contents[name] = data
-    staging = folder.with_name(f"{folder.name}.staging-shipped-{os.getpid()}")
+    staging = folder.with_name(f"{folder.name}.staging-shipped-{os.getpid()}-{uuid.uuid4().hex[:8]}")
     shutil.rmtree(staging, ignore_errors=True)
     staging.mkdir(parents=True)
     for name, data in contents.items():
