@@ -23,7 +23,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-__all__ = ["SHIPPED_DIR", "Shipped", "ShippedWeightsError", "find_shipped", "key_text", "write_shipped"]
+__all__ = ["SHIPPED_DIR", "Shipped", "ShippedWeightsError", "find_shipped", "key_text", "read_checked",
+           "write_shipped"]
 
 SHIPPED_DIR = Path(__file__).resolve().parent / "weights"
 
@@ -64,6 +65,25 @@ def _read_provenance(path: Path) -> dict[str, Any]:
     return prov
 
 
+def read_checked(path: Path, size: int, sha256: str, what: str,
+                 error: type[ValueError] = ShippedWeightsError) -> bytes:
+    """The bytes of the shipped file ``path``, which its provenance says are ``size`` bytes with ``sha256``.
+
+    Raises:
+        error: the file is missing or unreadable, or has another size or sha256 (the message names
+            ``what`` and the path, and says to reinstall the package).
+    """
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise error(f"{what} {path}: missing or unreadable ({exc}); reinstall the package") from exc
+    digest = hashlib.sha256(data).hexdigest()
+    if len(data) != size or digest != sha256:
+        raise error(f"{what} {path}: {len(data)} bytes with sha256 {digest[:12]}..., its provenance says {size} "
+                    f"bytes, {str(sha256)[:12]}...; the file is damaged: reinstall the package")
+    return data
+
+
 def find_shipped(kind: str, key: Mapping[str, Any], directory: Path | None = None) -> Shipped | None:
     """The shipped weights of attacker ``kind`` made under exactly ``key``, verified; None if none match.
 
@@ -78,16 +98,7 @@ def find_shipped(kind: str, key: Mapping[str, Any], directory: Path | None = Non
         if prov["kind"] != kind or key_text(prov["key"]) != wanted:
             continue
         weights = prov_path.with_suffix(".safetensors")
-        try:
-            data = weights.read_bytes()
-        except OSError as exc:
-            raise ShippedWeightsError(f"shipped weights {weights}: missing or unreadable ({exc}), though "
-                                      f"{prov_path.name} describes them; reinstall the package") from exc
-        digest = hashlib.sha256(data).hexdigest()
-        if len(data) != prov["size"] or digest != prov["sha256"]:
-            raise ShippedWeightsError(f"shipped weights {weights}: {len(data)} bytes with sha256 {digest[:12]}..., "
-                                      f"its provenance says {prov['size']} bytes, {str(prov['sha256'])[:12]}...; "
-                                      "the file is damaged: reinstall the package")
+        data = read_checked(weights, prov["size"], prov["sha256"], f"shipped weights (described by {prov_path.name})")
         return Shipped(weights, data, prov)
     return None
 

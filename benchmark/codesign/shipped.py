@@ -28,6 +28,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from attacks.shipped_weights import key_text, read_checked
 from benchmark.cache import write_verified
 from benchmark.codesign.artifacts import publish_directory
 from benchmark.codesign.curves import PUBLISHED_FILES
@@ -43,10 +44,6 @@ PROVENANCE = "shipped.json"
 
 class ShippedLensError(ValueError):
     """A shipped co-design folder is malformed, or one of its files does not match its provenance."""
-
-
-def _canonical(data: Any) -> str:
-    return json.dumps(json.loads(json.dumps(data)), sort_keys=True)
 
 
 def shipped_provenance(folder_name: str, directory: Path | None = None) -> dict[str, Any] | None:
@@ -85,23 +82,13 @@ def install_shipped(folder: Path, config: Mapping[str, Any], directory: Path | N
     prov = shipped_provenance(folder.name, directory)
     if prov is None:
         return False
-    if _canonical(prov["config"]) != _canonical(config):
+    if key_text(prov["config"]) != key_text(config):
         raise ShippedLensError(f"shipped co-design {source}: its configuration is not the run's, though the "
                                "folder names match; reinstall the package or remake it with `python -m benchmark "
                                "ship-lens`")
-    contents = {}
-    for name, expected in prov["files"].items():
-        try:
-            data = (source / name).read_bytes()
-        except OSError as exc:
-            raise ShippedLensError(f"shipped co-design file {source / name}: missing or unreadable ({exc}); "
-                                   "reinstall the package") from exc
-        digest = hashlib.sha256(data).hexdigest()
-        if len(data) != expected["bytes"] or digest != expected["sha256"]:
-            raise ShippedLensError(f"shipped co-design file {source / name}: {len(data)} bytes with sha256 "
-                                   f"{digest[:12]}..., its provenance says {expected['bytes']} bytes, "
-                                   f"{str(expected['sha256'])[:12]}...; the file is damaged: reinstall the package")
-        contents[name] = data
+    contents = {name: read_checked(source / name, expected["bytes"], expected["sha256"], "shipped co-design file",
+                                   ShippedLensError)
+                for name, expected in prov["files"].items()}
     staging = folder.with_name(f"{folder.name}.staging-shipped-{os.getpid()}-{uuid.uuid4().hex[:8]}")
     shutil.rmtree(staging, ignore_errors=True)
     staging.mkdir(parents=True)
