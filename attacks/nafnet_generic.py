@@ -39,7 +39,7 @@ from attacks.shipped_weights import Shipped
 from attacks.restorer_training import (
     RestorerBudget,
     collect_pairs,
-    fingerprint,
+    data_identity,
     random_crops,
     shipped_or_fit,
 )
@@ -124,7 +124,7 @@ class NafnetGeneric(Restorer):
         return self._key(budget, sharp, ctx.seed)
 
     def _key(self, budget: RestorerBudget, sharp: Tensor, seed: int) -> dict[str, Any]:
-        return {"attack": self.name, "budget": budget.to_dict(), "data": fingerprint(sharp), "seed": seed}
+        return {"attack": self.name, "budget": budget.to_dict(), "data": data_identity(sharp), "seed": seed}
 
     def restore(self, sensor: Tensor) -> Tensor:
         """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""

@@ -22,7 +22,7 @@ from attacks.onnx_backend import InferenceEngine, check_backend
 from attacks.restorer_training import (
     RestorerBudget,
     collect_pairs,
-    fingerprint,
+    data_identity,
     lens_key,
     random_crops,
     shipped_or_fit,
@@ -93,7 +93,7 @@ class NafnetKnownPairs(Restorer):
 
     def _key(self, budget: RestorerBudget, ctx: FitContext, sensor: Tensor, sharp: Tensor) -> dict[str, Any]:
         return {"attack": self.name, "budget": budget.to_dict(), "lens": lens_key(ctx.lens),
-                "data": fingerprint(sensor, sharp), "seed": ctx.seed}
+                "data": data_identity(sensor, sharp), "seed": ctx.seed}
 
     def restore(self, sensor: Tensor) -> Tensor:
         """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""

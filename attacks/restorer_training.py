@@ -29,11 +29,12 @@ from torch import Tensor, nn
 from attacks import crops
 from attacks.base import ArtifactStore
 from attacks.networks.nafnet import NAFNet
-from attacks.shipped_weights import Shipped, find_shipped
+from attacks.shipped_weights import Shipped, data_summary, find_shipped
 
 __all__ = [
     "RestorerBudget",
     "collect_pairs",
+    "data_identity",
     "fingerprint",
     "lens_key",
     "load_or_train",
@@ -187,6 +188,13 @@ def fingerprint(*tensors: Tensor) -> str:
     for t in tensors:
         digest.update(t.detach().cpu().contiguous().numpy().tobytes())
     return digest.hexdigest()[:16]
+
+
+def data_identity(*tensors: Tensor) -> dict[str, Any]:
+    """What identifies training data in a cache key: ``sha256`` (``fingerprint``, exact bytes) and
+    ``summary`` (``attacks.shipped_weights.data_summary``), which shipped weights are matched by when
+    the bytes differ only by another CPU's float rounding (``attacks.shipped_weights.same_data``)."""
+    return {"sha256": fingerprint(*tensors), "summary": data_summary(*tensors)}
 
 
 def lens_key(lens: Any) -> Any:

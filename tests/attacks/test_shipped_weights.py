@@ -10,7 +10,8 @@ import torch
 
 import attacks
 from attacks import shipped_weights
-from attacks.shipped_weights import ShippedWeightsError, find_shipped, write_shipped
+from attacks.restorer_training import data_identity
+from attacks.shipped_weights import ShippedWeightsError, find_shipped, same_data, write_shipped
 from benchmark.cache import ArtifactCache
 
 
@@ -29,6 +30,29 @@ def test_found_by_the_exact_key_only(tmp_path):
     assert found is not None and found.data == b"weights" and found.describe()["commit"] == "c"
     assert find_shipped("nafnet-generic", {**KEY, "seed": 1}, tmp_path) is None
     assert find_shipped("nafnet-known-pairs", KEY, tmp_path) is None
+
+
+def _sensor_like(seed: int) -> torch.Tensor:
+    g = torch.Generator().manual_seed(seed)
+    scene = torch.rand(8, 3, 64, 64, generator=torch.Generator().manual_seed(0))
+    return ((scene + 0.006 * torch.randn(scene.shape, generator=g)) * 1023).round().clamp(0, 1023) / 1023
+
+
+def test_data_that_differs_by_float_rounding_is_the_same_data_and_another_noise_draw_is_not(tmp_path):
+    sensor = _sensor_like(1)
+    # Another CPU's rounding: 0.01 % of the pixels one ADC step off, which changes the byte hash.
+    flipped = sensor.clone().flatten()
+    flipped[torch.randperm(flipped.numel(), generator=torch.Generator().manual_seed(2))[:10]] += 1 / 1023
+    flipped = flipped.reshape(sensor.shape)
+    here, there, redrawn = data_identity(sensor), data_identity(flipped), data_identity(_sensor_like(3))
+    assert here["sha256"] != there["sha256"]
+    assert same_data(here, there) and same_data(here, here)
+    assert not same_data(here, redrawn)  # the same scenes, another noise draw
+    assert not same_data(here, data_identity(sensor[:4]))  # fewer images
+    write_shipped("nafnet-known-pairs-x", "nafnet-known-pairs", {**KEY, "data": here}, b"w", {}, tmp_path)
+    assert find_shipped("nafnet-known-pairs", {**KEY, "data": there}, tmp_path) is not None
+    assert find_shipped("nafnet-known-pairs", {**KEY, "data": redrawn}, tmp_path) is None
+    assert find_shipped("nafnet-known-pairs", {**KEY, "data": there, "seed": 1}, tmp_path) is None
 
 
 def test_a_damaged_file_is_reported_with_its_path(tmp_path):

@@ -23,9 +23,14 @@ from lenses.spec import load_spec
 TINY = dataclasses.replace(PROFILES["smoke"], image_size=(64, 128), n_train=2, train_crop=(48, 48), batch_size=4,
                            codesign_steps=2, pretrain_steps=1, utility_model="tiny", adversary_width=4)
 # Differences come from float reduction order only (sums split over ranks, batch-norm statistics
-# from all-reduced sums in float64): after two steps the coefficients differ by <= 3e-6 and the
-# utility weights by <= 1e-6, except the weights of GAUGE.
+# from all-reduced sums in float64): after two steps the utility weights differ by <= 1e-6, except
+# the weights of GAUGE. The coefficients' second Adam step (lr 2e-2 um) divides the two steps'
+# gradients, so rounding moves it further, by a CPU-dependent amount: for os-d-1, two ranks against
+# one process (one thread each) measured 6e-6 um on MKL's AVX2 path and 1.7e-4 um on its AVX-512
+# path (gp: <= 1e-7), and one process alone moves 1e-4 um between ATen's AVX2 and AVX-512 kernels.
+# COEFFICIENT_ATOL is 5 % of one step; another global batch moves them by a sizeable part of lr.
 ATOL = 1e-5
+COEFFICIENT_ATOL = 1e-3
 # Weights whose gradient is zero in exact arithmetic: per-channel constants that the decode head's
 # batch norm subtracts again (the projection biases, the last encoder stage's layer-norm bias) and
 # the running mean that tracks them. Their gradients are rounding noise, which Adam turns into
@@ -98,12 +103,20 @@ def ranks(tmp_path_factory):
 @pytest.mark.parametrize("scheme", ["os-d-1", "gp"])
 def test_two_ranks_compute_the_single_process_run(ranks, scheme, tmp_path):
     _, results = ranks
-    single = CoDesign(load_spec(START_SPEC), SCHEMES[scheme], TINY, 0, "cpu", tmp_path).train(progress=False)
+    # One thread, as each rank: BLAS splits its sums by thread count too (measured, one process, MKL's
+    # AVX2 path: 20 % of the utility weights move by more than ATOL between 1 and 2 threads).
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        single = CoDesign(load_spec(START_SPEC), SCHEMES[scheme], TINY, 0, "cpu", tmp_path).train(progress=False)
+    finally:
+        torch.set_num_threads(threads)
     for r in results:
         assert r[scheme]["world_size"] == WORLD
         assert r[scheme]["steps"] == list(range(TINY.codesign_steps))
         torch.testing.assert_close(torch.tensor(r[scheme]["coefficients_um"]),
-                                   torch.tensor(single.record["final_coefficients_um"]), atol=ATOL, rtol=0)
+                                   torch.tensor(single.record["final_coefficients_um"]), atol=COEFFICIENT_ATOL,
+                                   rtol=0)
         close, total = 0, 0
         for name, expected in single.utility_net.state_dict().items():
             got, expected = r[scheme]["utility"][name].float(), expected.float()
@@ -119,7 +132,7 @@ def test_two_ranks_compute_the_single_process_run(ranks, scheme, tmp_path):
         # seeded initial mask and the new clean-net recipe met (the cause is not yet pinned down).
         assert close >= 0.995 * total, f"{total - close} of {total} utility weights differ by more than {ATOL}"
     moved = torch.tensor(single.record["final_coefficients_um"]) - torch.tensor(load_spec(START_SPEC).mask.zernike_um)
-    assert float(moved.abs().max()) > 100 * ATOL, "the comparison must see the optics move"
+    assert float(moved.abs().max()) > 10 * COEFFICIENT_ATOL, "the comparison must see the optics move"
 
 
 def test_ranks_hold_identical_state_after_every_step(ranks):
