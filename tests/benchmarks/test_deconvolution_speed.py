@@ -10,7 +10,6 @@ run by default.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 
 import pytest
@@ -23,6 +22,7 @@ from attacks.richardson_lucy_known_psf import RichardsonLucyKnownPSF
 from attacks.wiener_known_psf import WienerKnownPSF
 
 import deconvolution_before
+from alternating import best_seconds
 
 # Measured on the shared 2-core machine (load 2-3, defocus PSF 39 x 39): Wiener 1.41x on scenes and
 # 1.74x on windows, Richardson-Lucy 1.21x and 1.60x; asserted with a margin for the shared load.
@@ -78,19 +78,6 @@ def test_restore_equals_the_code_before_the_speedup(monkeypatch, name):
             assert (_psnr_db(new_out, scene) - _psnr_db(old_out, scene)).abs().max() < 0.01
 
 
-def _alternate(runs: dict[str, Callable[[], object]], rounds: int) -> dict[str, float]:
-    """Best seconds per run, after a warm-up each, the runs alternating round by round."""
-    for run in runs.values():
-        run()
-    seconds: dict[str, list[float]] = {name: [] for name in runs}
-    for _ in range(rounds):
-        for name, run in runs.items():
-            t0 = time.perf_counter()
-            run()
-            seconds[name].append(time.perf_counter() - t0)
-    return {name: min(s) for name, s in seconds.items()}
-
-
 @pytest.mark.parametrize("workload", ["scenes", "windows"])
 @pytest.mark.parametrize("name", ["wiener-known-psf", "richardson-lucy-known-psf"])
 def test_restorer_speedup_on_quick_shapes(benchmark, name, workload):
@@ -106,7 +93,7 @@ def test_restorer_speedup_on_quick_shapes(benchmark, name, workload):
                     restore(batch)
         return go
 
-    best = _alternate({"before": run(before), "new": run(new)}, ROUNDS)
+    best = best_seconds({"before": run(before), "new": run(new)}, ROUNDS)
     benchmark.pedantic(run(new), rounds=1, iterations=1, warmup_rounds=0)
     speedup = best["before"] / best["new"]
     n_images = sum(b.shape[0] for b in batches)

@@ -11,7 +11,6 @@ The chart test at the end is an ordinary test and runs by default.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 
 import pytest
@@ -24,6 +23,8 @@ from attacks.restorer_training import RestorerBudget
 from benchmark.charts.restorers import restorer_points, write_restorer_speed_chart
 from benchmark.schema import migrate_legacy_row
 from benchmark.profiles import PROFILES
+
+from alternating import best_seconds
 
 ROUNDS = 3
 BATCH_ROUNDS = 2
@@ -42,24 +43,11 @@ def _quick_red10() -> torch.nn.Module:
     return RED10(width=PROFILES["quick"].adversary_width).eval()
 
 
-def _alternate(runs: dict[str, Callable[[], object]], rounds: int) -> dict[str, float]:
-    """Best seconds per run, after a warm-up each, the runs alternating round by round."""
-    for run in runs.values():
-        run()
-    seconds: dict[str, list[float]] = {name: [] for name in runs}
-    for _ in range(rounds):
-        for name, run in runs.items():
-            t0 = time.perf_counter()
-            run()
-            seconds[name].append(time.perf_counter() - t0)
-    return {name: min(s) for name, s in seconds.items()}
-
-
 def _race(benchmark, slow: tuple[str, Callable[[], object]], fast: tuple[str, Callable[[], object]], images: int,
           rounds: int) -> float:
-    """Best seconds of both runs alternating (`_alternate`), the fast one timed for pytest-benchmark;
+    """Best seconds of both runs alternating (`alternating.best_seconds`), the fast one timed for pytest-benchmark;
     each one's images/s and the speedup (`<fast>_speedup`) go to `extra_info`. Returns the speedup."""
-    best = _alternate(dict([slow, fast]), rounds)
+    best = best_seconds(dict([slow, fast]), rounds)
     benchmark.pedantic(fast[1], rounds=1, iterations=1, warmup_rounds=0)
     speedup = best[slow[0]] / best[fast[0]]
     benchmark.extra_info.update({f"{slow[0]}_images_per_s": images / best[slow[0]],

@@ -10,9 +10,6 @@ Target (issue 17): ONNX Runtime faster than torch, with the same predictions; th
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
-
 import torch
 
 from attacks.onnx_backend import OnnxModel, export_onnx
@@ -21,21 +18,10 @@ from benchmark.utility.clean import load_verified, shipped_for
 from benchmark.utility.scoring import predict, window_for
 from benchmark.utility.segformer_onnx import FoldedSegformerLogits, segformer_engine
 
+from alternating import alternate
+
 ROUNDS = 3
 THREADS = 2
-
-
-def _alternate(runs: dict[str, Callable[[], torch.Tensor]]) -> tuple[dict[str, torch.Tensor], dict[str, list[float]]]:
-    """Each run's output (a warm-up call) and its seconds over ROUNDS rounds, the runs taking turns in
-    each round so that all see the same load on the shared machine."""
-    preds = {name: run() for name, run in runs.items()}
-    seconds: dict[str, list[float]] = {name: [] for name in runs}
-    for _ in range(ROUNDS):
-        for name, run in runs.items():
-            t0 = time.perf_counter()
-            run()
-            seconds[name].append(time.perf_counter() - t0)
-    return preds, seconds
 
 
 def test_segformer_b0_sliding_window_torch_vs_onnx(benchmark, tmp_path):
@@ -53,7 +39,7 @@ def test_segformer_b0_sliding_window_torch_vs_onnx(benchmark, tmp_path):
         assert engine.backend == "onnx"
         runs = {"torch": lambda: predict(net, images, window, stride, profile.batch_size),
                 "onnx": lambda: predict(net, images, window, stride, profile.batch_size, logits=engine)}
-        preds, seconds = _alternate(runs)
+        preds, seconds = alternate(runs, ROUNDS)
         benchmark.pedantic(runs["onnx"], rounds=1, iterations=1, warmup_rounds=0)
     finally:
         torch.set_num_threads(threads)
@@ -87,7 +73,7 @@ def test_segformer_engine_keeps_its_arena_between_runs(benchmark, tmp_path):
                                shrink_arena=True)
         runs = {"kept": lambda: predict(net, images, window, stride, profile.batch_size, logits=kept),
                 "given_back": lambda: predict(net, images, window, stride, profile.batch_size, logits=given_back)}
-        preds, seconds = _alternate(runs)
+        preds, seconds = alternate(runs, ROUNDS)
         benchmark.pedantic(runs["kept"], rounds=1, iterations=1, warmup_rounds=0)
     finally:
         torch.set_num_threads(threads)
