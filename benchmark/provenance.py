@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import functools
+import os
 import platform
 import subprocess
 from importlib.metadata import PackageNotFoundError, version
@@ -44,10 +45,26 @@ def package_versions() -> str:
     return ";".join(out)
 
 
+@functools.lru_cache(maxsize=1)
+def cpu_model(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
+    """The CPU's model name (Linux's ``/proc/cpuinfo``), else what ``platform`` knows."""
+    try:
+        for line in cpuinfo.read_text(errors="replace").splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name" and value.strip():
+                return " ".join(value.split())
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
 def describe_device(device: str) -> str:
+    """The device a row was measured on. For a CPU: its model, the vector instructions torch's kernels
+    use (float rounding, and so the last digits of trained results, differ between AVX2 and AVX-512
+    kernels) and the core count (2-core machines of one name have run 1.6x apart)."""
     if device.startswith("cuda") and torch.cuda.is_available():
         return f"{device}:{torch.cuda.get_device_name(torch.device(device))}"
-    return f"cpu:{platform.processor() or platform.machine()}"
+    return f"cpu:{cpu_model()} ({torch.backends.cpu.get_cpu_capability()}, {os.cpu_count()} cores)"
 
 
 def provenance(device: str) -> dict[str, object]:
