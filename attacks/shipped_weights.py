@@ -12,9 +12,10 @@ instead of loading weights made for something else. The one tolerant field is th
 CPUs by float rounding (measured: 0.009 % of the known-pairs pixels of the quick gp lens move by one
 10-bit ADC step between AVX2 and AVX-512 kernels), which changes every byte hash; data whose summaries
 agree within ``SUMMARY_ATOL`` is the same data (``same_data``); another sensor-noise draw on the same
-scenes moves the median summary entry by 1.2e-4 and 95 % of them beyond ``SUMMARY_ATOL``. Files are read only as safetensors, after their
-size and sha256 match; a mismatch raises ``ShippedWeightsError`` naming the file (a damaged install is
-reported, not silently retrained around).
+scenes moves the median summary entry by 1.2e-4 and 95 % of them beyond ``SUMMARY_ATOL``.
+
+Files are read only as safetensors, after their size and sha256 match; a mismatch raises
+``ShippedWeightsError`` naming the file (a damaged install is reported, not silently retrained around).
 
 Made by ``python -m benchmark pretrain-attacker nafnet-generic`` (``benchmark.attack_weights``).
 """
