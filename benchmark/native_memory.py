@@ -55,6 +55,23 @@ def _libc() -> ctypes.CDLL | None:
     return libc if libc is not None and hasattr(libc, "malloc_trim") else None
 
 
+class _MallInfo2(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_size_t) for name in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
+                                                      "fsmblks", "uordblks", "fordblks", "keepcost")]
+
+
+def live_heap_bytes() -> int | None:
+    """Bytes malloc has handed out and not had back (heap chunks in use plus mmapped blocks, glibc's
+    ``mallinfo2``): what the process keeps alive, without the free heap the resident size also holds;
+    None off glibc or before glibc 2.33."""
+    libc = _libc()
+    if libc is None or not hasattr(libc, "mallinfo2"):
+        return None
+    libc.mallinfo2.restype = _MallInfo2
+    info = libc.mallinfo2()
+    return int(info.uordblks + info.hblkhd)
+
+
 def release_free_memory() -> bool:
     """Collect Python's garbage, then give the allocator's free heap back to the system; returns
     whether it could (False off glibc, where only the collection runs)."""

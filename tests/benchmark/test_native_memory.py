@@ -6,7 +6,6 @@ and glibc's ``mallinfo2`` counts the bytes still allocated. The resident size is
 the free heap the allocator keeps (one CI machine grew 344 MiB bounded and 20 MiB unbounded, this
 one 100-340 and 470-700 MiB, while the live bytes grew 6 and 12 MiB)."""
 
-import ctypes
 import os
 import subprocess
 import sys
@@ -18,15 +17,8 @@ from benchmark import native_memory
 
 SHAPES = 300  # distinct input shapes, more than the bounded capacity (128 primitives)
 GROWTH = textwrap.dedent(f"""
-    import benchmark, ctypes, os, torch
-    class MallInfo2(ctypes.Structure):
-        _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
-                                                    "fsmblks", "uordblks", "fordblks", "keepcost")]
-    libc = ctypes.CDLL("libc.so.6")
-    libc.mallinfo2.restype = MallInfo2
-    def live():  # bytes allocated and not freed: heap chunks in use plus mmapped blocks
-        info = libc.mallinfo2()
-        return info.uordblks + info.hblkhd
+    import benchmark, os, torch  # importing benchmark bounds the cache
+    from benchmark.native_memory import live_heap_bytes as live
     torch.set_num_threads(1)
     net = torch.nn.Sequential(*[torch.nn.Conv2d(64, 64, 3, padding=1) for _ in range(2)]).eval()
     with torch.no_grad():
@@ -56,7 +48,7 @@ def _run(env_value: str | None) -> tuple[str, str, float]:
     return capacity, creation, float(grown)
 
 
-@pytest.mark.skipif(not hasattr(ctypes.CDLL(None), "mallinfo2"), reason="needs glibc >= 2.33 (mallinfo2)")
+@pytest.mark.skipif(native_memory.live_heap_bytes() is None, reason="needs glibc >= 2.33 (mallinfo2)")
 def test_importing_benchmark_bounds_the_cache_and_keeps_a_user_setting():
     assert os.environ[native_memory.ONEDNN_CACHE_VARIABLE]  # this process imported benchmark
     bounded_capacity, bounded_creation, bounded = _run(None)
