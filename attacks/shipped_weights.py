@@ -133,11 +133,15 @@ def find_shipped(kind: str, key: Mapping[str, Any], directory: Path | None = Non
             of another sha256; or a provenance of ``kind`` that cannot be read.
     """
     folder = SHIPPED_DIR if directory is None else Path(directory)
-    wanted = key_text({k: v for k, v in key.items() if k != "data"})
+
+    def all_but_data(k: Mapping[str, Any]) -> str:
+        return key_text({name: value for name, value in k.items() if name != "data"})
+
+    wanted = all_but_data(key)
     for prov_path in sorted(folder.glob(f"{kind}-*.json")):
         prov = _read_provenance(prov_path)
         shipped_key = prov["key"] if isinstance(prov["key"], dict) else {}
-        if (prov["kind"] != kind or key_text({k: v for k, v in shipped_key.items() if k != "data"}) != wanted
+        if (prov["kind"] != kind or all_but_data(shipped_key) != wanted
                 or not same_data(shipped_key.get("data"), key.get("data"))):
             continue
         weights = prov_path.with_suffix(".safetensors")
