@@ -29,6 +29,7 @@ import torch.nn.functional as F
 from scipy.fft import next_fast_len
 from torch import Tensor
 
+from attacks import real_fft
 from attacks.base import FitContext, Restorer, ThreatModel
 from attacks.real_fft import OtfCache, circular_filter, image_chunks
 from attacks.wiener_known_psf import edge_taper
@@ -97,11 +98,11 @@ def _padding(size: int, radius: int) -> tuple[int, int]:
 
 
 def _chunks(y: Tensor, psf: Tensor, pad: bool) -> Iterator[slice]:
-    """Slices of the batch ``y`` whose padded spectra fit ``attacks.real_fft.CHUNK_BYTES``."""
+    """Slices of the batch ``y`` whose padded spectra fit ``attacks.real_fft.ITERATIVE_CHUNK_BYTES``."""
     top, bottom, left, right = _padding_of(y, psf, pad)
     complex_bytes = 2 * y.element_size()
     per_image = y.shape[-3] * (y.shape[-2] + top + bottom) * ((y.shape[-1] + left + right) // 2 + 1) * complex_bytes
-    return image_chunks(y.shape[0], per_image)
+    return image_chunks(y.shape[0], per_image, real_fft.ITERATIVE_CHUNK_BYTES)
 
 
 def richardson_lucy(y: Tensor, psf: Tensor | OtfCache, iterations: int, pad: bool = True) -> Tensor:

@@ -67,6 +67,7 @@ def test_image_chunks_cover_the_batch_under_the_byte_bound(monkeypatch):
     assert [(s.start, s.stop) for s in image_chunks(7, 30)] == [(0, 3), (3, 6), (6, 9)]
     assert len(list(image_chunks(3, 1000))) == 3  # never fewer than one image
     assert list(image_chunks(0, 30)) == []
+    assert [(s.start, s.stop) for s in image_chunks(7, 30, max_bytes=60)] == [(0, 2), (2, 4), (4, 6), (6, 8)]
 
 
 @pytest.mark.parametrize("cpu_fft", ["torch", "scipy"])
