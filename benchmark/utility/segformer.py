@@ -18,8 +18,10 @@ from collections.abc import Callable, Mapping  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import torch  # noqa: E402
-import torch.nn.functional as F  # noqa: E402
 from transformers import SegformerConfig, SegformerForSemanticSegmentation  # noqa: E402
+from transformers.models.segformer.modeling_segformer import SegformerDecodeHead  # noqa: E402
+
+from benchmark.utility.bilinear import resize_for_training  # noqa: E402
 
 __all__ = [
     "IMAGENET_MEAN",
@@ -46,6 +48,32 @@ IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 
 
+class TrainingDecodeHead(SegformerDecodeHead):
+    """SegFormer's all-MLP decode head, its four resizes done by `resize_for_training` when a gradient
+    flows (matrix products, the first stage not resized), else exactly ``transformers``' forward.
+
+    The same weights and submodules as ``SegformerDecodeHead`` (`build_segformer` swaps the class of
+    the head it built, so initialisation and the random stream are untouched); the values equal the
+    original's up to float rounding (tests/benchmark/test_bilinear.py), and inference, run without a
+    gradient, is the original to the bit.
+    """
+
+    def forward(self, encoder_hidden_states: torch.Tensor, **kwargs: object) -> torch.Tensor:
+        if not (torch.is_grad_enabled() and any(h.requires_grad for h in encoder_hidden_states)) or (
+                self.config.reshape_last_stage is False):
+            return super().forward(encoder_hidden_states, **kwargs)
+        batch_size = encoder_hidden_states[-1].shape[0]
+        size = encoder_hidden_states[0].shape[2:]
+        stages = []
+        for state, linear_proj in zip(encoder_hidden_states, self.linear_projections):
+            height, width = state.shape[2], state.shape[3]
+            state = linear_proj(state).transpose(1, 2).reshape(batch_size, -1, height, width)
+            stages.append(resize_for_training(state, size))
+        hidden = self.linear_fuse(torch.cat(stages[::-1], dim=1))
+        hidden = self.dropout(self.activation(self.batch_norm(hidden)))
+        return self.classifier(hidden)
+
+
 def build_segformer(variant: str = "b0", num_labels: int = 19) -> SegformerForSemanticSegmentation:
     """Build a randomly initialised SegFormer without touching the network.
 
@@ -66,7 +94,9 @@ def build_segformer(variant: str = "b0", num_labels: int = 19) -> SegformerForSe
         semantic_loss_ignore_index=255,
         **VARIANTS[variant],
     )
-    return SegformerForSemanticSegmentation(config)
+    model = SegformerForSemanticSegmentation(config)
+    model.decode_head.__class__ = TrainingDecodeHead  # the same module, a faster backward (see the class)
+    return model
 
 
 def _read_state_dict(path: Path) -> Mapping[str, torch.Tensor]:
@@ -191,14 +221,15 @@ def segment_logits(model: SegformerForSemanticSegmentation, images: torch.Tensor
 
     Returns:
         (B, num_labels, H, W) logits: the model's 1/4-resolution logits bilinearly upsampled
-        (align_corners=False, as SegFormer's inference does).
+        (align_corners=False, as SegFormer's inference does; by matrix products when a gradient flows,
+        `resize_for_training`).
     """
     if images.dim() != 4 or images.shape[1] != 3:
         raise ValueError(f"images must be (B, 3, H, W) RGB in [0, 1], got shape {tuple(images.shape)}")
     mean = images.new_tensor(IMAGENET_MEAN).view(1, 3, 1, 1)
     std = images.new_tensor(IMAGENET_STD).view(1, 3, 1, 1)
     logits = model(pixel_values=(images - mean) / std).logits
-    return F.interpolate(logits, size=images.shape[-2:], mode="bilinear", align_corners=False)
+    return resize_for_training(logits, images.shape[-2:])
 
 
 def _window_starts(size: int, window: int, stride: int) -> list[int]:
