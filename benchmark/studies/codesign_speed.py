@@ -27,7 +27,7 @@ from unittest import mock
 import torch
 
 from benchmark.codesign import trainer
-from benchmark.codesign.adversary import build_adversary
+from benchmark.codesign import adversary
 from benchmark.codesign.builtin import START_SPEC
 from benchmark.codesign.schemes import SCHEMES
 from benchmark.profiles import get_profile
@@ -58,7 +58,7 @@ def time_codesign_steps(profile_name: str = "paper", device: str = "cpu", steps:
 
     def untrained_adversary(lens: Any, sampler: Any, p: Any, seed: int, dev: str, *args: Any,
                             **kwargs: Any) -> tuple[torch.nn.Module, dict]:
-        return build_adversary(p.adversary_width, lens).to(dev), {"steps": 0, "untrained": True}
+        return adversary.for_training(adversary.build_adversary(p.adversary_width, lens), dev), {"steps": 0, "untrained": True}
 
     def on_step(step: int, stats: dict) -> None:
         _synchronize(device)  # the step's losses are read back already; this keeps the mark honest

@@ -6,7 +6,7 @@ those resizes (a scatter kernel: about 13 ms for one (8, 256, 32, 32) map on 2 c
 around it took about a fifth of a quick co-design step (torch.profiler, 2026-11-29). The same resize is
 ``A_h @ x @ A_w^T`` with fixed (out, in) weight matrices of two non-zeros a row, whose forward and
 backward are dense matrix products; the first stage, already at the target size, is not resized at all
-(``F.interpolate`` copies it). tests/benchmarks/test_segformer_training_speed.py times both in one run:
+(``F.interpolate`` copies it). tests/benchmarks/test_training_step_speed.py times both in one run:
 a quick utility-net step 1.14-1.25x, a quick gp co-design step 1.10-1.21x (2-core AVX-512 machine).
 
 The weights are torch's own (``area_pixel_compute_source_index`` with ``align_corners=False``: source
