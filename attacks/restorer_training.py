@@ -99,6 +99,10 @@ class RestorerBudget:
         return dataclasses.asdict(self)
 
 
+# The memory layout the restorers train in (see `train_restorer`); the model goes back to the default after.
+TRAINING_LAYOUT = torch.channels_last
+
+
 def negative_psnr(output: Tensor, target: Tensor) -> Tensor:
     """NAFNet's PSNR loss: mean over the batch of ``10 log10(MSE_i)`` (images in [0, 1]), i.e.
     minus the PSNR in dB; scalar."""
@@ -156,8 +160,13 @@ def train_restorer(model: nn.Module, next_batch: Callable[[torch.Generator], tup
 
     Returns:
         The loss (negative PSNR, dB) of every step.
+
+    The steps run with the weights in channels-last layout (a quick NAFNet step 0.34 -> 0.27 s on 2
+    cores, 2026-11-29: the convolutions' backward no longer copies activations between layouts; the
+    sums' order, so float rounding, differs); the model is handed back in the default layout, so it
+    infers exactly as the same weights loaded from the cache do.
     """
-    model.to(device).train()
+    model.to(device).to(memory_format=TRAINING_LAYOUT).train()
     optimizer = torch.optim.AdamW(model.parameters(), lr=_LR, betas=_BETAS, weight_decay=_WEIGHT_DECAY)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=max(steps, 1), eta_min=_LR_MIN)
     generator = torch.Generator().manual_seed(seed)
@@ -179,6 +188,7 @@ def train_restorer(model: nn.Module, next_batch: Callable[[torch.Generator], tup
             model.train()
         if (step + 1) % max(steps // 10, 1) == 0:
             log.info("step %d/%d: %.2f dB (%.1f s)", step + 1, steps, -loss.item(), time.perf_counter() - t0)
+    model.to(memory_format=torch.contiguous_format)
     return losses
 
 

@@ -59,7 +59,7 @@ def for_training(net: RED10, device: str) -> RED10:
     copies of 16 MB a quick step, 6 ms each on 2 cores); a quick gp co-design step took 0.79-0.83 s before
     and 0.76-0.77 s after (three rounds each, 2-core AVX-512 machine, 2026-11-29). The values are the
     same; ``save_weights`` stores them contiguous, and evaluation loads them into a default-layout net."""
-    return net.to(device=device, memory_format=torch.channels_last)
+    return net.to(device).to(memory_format=torch.channels_last)
 
 
 def white_balanced(sensor: torch.Tensor, lens: Lens) -> torch.Tensor:
