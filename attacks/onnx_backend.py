@@ -28,10 +28,13 @@ __all__ = ["BACKENDS", "DEFAULT_BATCH_PIXELS", "Backend", "InferenceEngine", "On
 Backend = Literal["auto", "torch", "onnx"]
 BACKENDS: tuple[str, ...] = ("auto", "torch", "onnx")
 _OPSET = 17
-# Pixels per network call: 4 images of 512 x 1024. On 2 cores ONNX Runtime ran the quick NAFNet 1.5x
-# (RED10 1.1x) as fast four at a time as one at a time (test_restorer_speed.py), at 2.8 GB peak
-# resident memory for NAFNet; a batch of 8 at that size would hold several GiB of activations.
-DEFAULT_BATCH_PIXELS = 4 * 512 * 1024
+# Pixels per network call: 2 images of 512 x 1024, the most the evaluation hands a restorer in one call
+# (benchmark.evaluation.RESTORE_PIXELS_PER_BATCH), so a restorer called directly batches as in a run. Four
+# were the budget before: on the 2-core AVX2 machine ONNX Runtime ran the quick NAFNet 1.5x (RED10 1.1x)
+# as fast four at a time as one at a time, on the 2-core AVX-512 machine NAFNet 0.71x (2026-11-29), while
+# two at a time there ran NAFNet 1.02x and RED10 1.13x (tests/benchmarks/test_restorer_speed.py), at
+# half the activations' memory (NAFNet peaked at 2.8 GB resident with four).
+DEFAULT_BATCH_PIXELS = 2 * 512 * 1024
 
 log = logging.getLogger(__name__)
 

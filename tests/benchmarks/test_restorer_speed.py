@@ -1,5 +1,6 @@
 """Restorer inference speed at 512 x 1024: torch against ONNX Runtime (one image), and ONNX Runtime
-batched (the engine's pixel budget, 4 images a call) against one image at a time.
+batched (the engine's pixel budget: 2 images a call, as the evaluation hands them over) against one
+image at a time.
 
 Run with `pytest tests/benchmarks/test_restorer_speed.py --benchmark-only`. Both paths of a
 comparison alternate in the same rounds, so both see the same load on the shared machine; the
@@ -81,12 +82,14 @@ def test_restorer_batched_vs_one_at_a_time(benchmark, make):
     model = make()
     x = torch.rand(4, 3, 512, 1024)
     batched = InferenceEngine(model, "onnx")
-    assert [b.shape[0] for b in batched.batches(x)] == [4]
+    assert [b.shape[0] for b in batched.batches(x)] == [2, 2]
     single = InferenceEngine(model, "onnx", batch_pixels=1)
     speedup = _race(benchmark, ("one_at_a_time", lambda: single(x)), ("batched", lambda: batched(x)), 4,
                     BATCH_ROUNDS)
-    # RED10 measured flat (1.76 vs 1.72 images/s), so "no slower" within 10 % of timing noise.
-    assert speedup > 0.9, f"batches of 4 at 512 x 1024 run {speedup:.2f}x one image at a time"
+    # RED10 once measured flat (1.76 vs 1.72 images/s), so "no slower" within 10 % of timing noise. On the 2-core
+    # AVX-512 machine (2026-11-29) the plain NAFNet ran 0.90-0.94x in batches of 2 (0.71x in batches of 4, the
+    # budget before), RED10 1.13-1.15x: there the target holds for RED10 and only just, if at all, for NAFNet.
+    assert speedup > 0.9, f"batches of 2 at 512 x 1024 run {speedup:.2f}x one image at a time"
 
 
 def test_folded_nafnet_vs_plain_in_onnx_runtime(benchmark):
