@@ -21,7 +21,7 @@ import torch  # noqa: E402
 from transformers import SegformerConfig, SegformerForSemanticSegmentation  # noqa: E402
 from transformers.models.segformer.modeling_segformer import SegformerDecodeHead  # noqa: E402
 
-from benchmark.utility.bilinear import resize_for_training  # noqa: E402
+from benchmark.utility.bilinear import resize_bilinear, resize_for_training  # noqa: E402
 
 __all__ = [
     "IMAGENET_MEAN",
@@ -49,7 +49,7 @@ IMAGENET_STD = (0.229, 0.224, 0.225)
 
 
 class TrainingDecodeHead(SegformerDecodeHead):
-    """SegFormer's all-MLP decode head, its four resizes done by `resize_for_training` when a gradient
+    """SegFormer's all-MLP decode head, its four resizes done by `resize_bilinear` when a gradient
     flows (matrix products, the first stage not resized), else exactly ``transformers``' forward.
 
     The same weights and submodules as ``SegformerDecodeHead`` (`build_segformer` swaps the class of
@@ -68,7 +68,7 @@ class TrainingDecodeHead(SegformerDecodeHead):
         for state, linear_proj in zip(encoder_hidden_states, self.linear_projections):
             height, width = state.shape[2], state.shape[3]
             state = linear_proj(state).transpose(1, 2).reshape(batch_size, -1, height, width)
-            stages.append(resize_for_training(state, size))
+            stages.append(resize_bilinear(state, size))
         hidden = self.linear_fuse(torch.cat(stages[::-1], dim=1))
         hidden = self.dropout(self.activation(self.batch_norm(hidden)))
         return self.classifier(hidden)

@@ -3,7 +3,8 @@
 Run with `pytest tests/benchmarks/test_training_step_speed.py --benchmark-only`. Before: ``transformers``'
 decode head and ``F.interpolate`` for the logits (the code before benchmark/utility/bilinear.py), and the
 co-design's RED10 adversary in the default memory layout; now: ``TrainingDecodeHead``,
-``resize_for_training`` and ``benchmark.codesign.adversary.for_training`` (channels-last). Both alternate
+``resize_for_training`` and ``benchmark.codesign.adversary.for_training`` (channels-last,
+``TRAINING_LAYOUT``). Both alternate
 in the same rounds (fastest round counts) with 2 threads, on the quick profile's batch (8 crops of
 128 x 128, SegFormer-B0):
 
@@ -134,7 +135,7 @@ def test_codesign_step_before_vs_now(benchmark, two_threads, monkeypatch):
     def before() -> float:  # build_segformer keeps transformers' head class; segment_logits F.interpolate
         with monkeypatch.context() as m, _before([]):
             m.setattr(segformer, "TrainingDecodeHead", SegformerDecodeHead)
-            m.setattr(adversary, "for_training", lambda net, device: net.to(device))
+            m.setattr(adversary, "TRAINING_LAYOUT", torch.contiguous_format)
             return now()
 
     per_step: dict[str, list[float]] = {"before": [], "now": []}
