@@ -62,7 +62,7 @@ class LensLike(Protocol):
 
 class ArtifactStore(Protocol):
     """Where an attacker keeps what it trained, addressed by (kind, key); the benchmark's cache
-    implements it (``benchmark.cache.ArtifactCache``). Writes are atomic and reads verified: a
+    implements it (``benchmark.store.cache.ArtifactCache``). Writes are atomic and reads verified: a
     missing, truncated or corrupt artifact loads as None (and is reported), so the caller rebuilds it.
     """
 

@@ -29,7 +29,7 @@ Backend = Literal["auto", "torch", "onnx"]
 BACKENDS: tuple[str, ...] = ("auto", "torch", "onnx")
 _OPSET = 17
 # Pixels per network call: 2 images of 512 x 1024, the most the evaluation hands a restorer in one call
-# (benchmark.evaluation.RESTORE_PIXELS_PER_BATCH), so a restorer called directly batches as in a run. Four
+# (benchmark.runner.evaluation.RESTORE_PIXELS_PER_BATCH), so a restorer called directly batches as in a run. Four
 # were the budget before: on the 2-core AVX2 machine ONNX Runtime ran the quick NAFNet 1.5x (RED10 1.1x)
 # as fast four at a time as one at a time, on the 2-core AVX-512 machine NAFNet 0.71x (2026-11-29), while
 # two at a time there ran NAFNet 1.02x and RED10 1.13x (tests/benchmarks/test_restorer_speed.py), at

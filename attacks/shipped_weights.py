@@ -17,7 +17,7 @@ scenes moves the median summary entry by 1.2e-4 and 95 % of them beyond ``SUMMAR
 Files are read only as safetensors, after their size and sha256 match; a mismatch raises
 ``ShippedWeightsError`` naming the file (a damaged install is reported, not silently retrained around).
 
-Made by ``python -m benchmark pretrain-attacker nafnet-generic`` (``benchmark.attack_weights``).
+Made by ``python -m benchmark pretrain-attacker nafnet-generic`` (``benchmark.publish.ship_attacker``).
 """
 
 from __future__ import annotations

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from benchmark.native_memory import bound_onednn_cache
+from benchmark.runner.diagnostics.native_memory import bound_onednn_cache
 
-bound_onednn_cache()  # before any network runs: see benchmark/native_memory.py
+bound_onednn_cache()  # before any network runs: see benchmark/runner/diagnostics/native_memory.py
 
 _API = ("Plan", "PlannedTask", "Results", "list_attacks", "list_lenses", "list_scene_sets", "load_lens", "plan", "run")
 __all__ = list(_API)

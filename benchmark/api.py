@@ -10,12 +10,12 @@ Example (README; tests/benchmark/test_api.py runs exactly these lines)::
 
 `run` validates every argument before any compute (errors name the argument and what would be
 valid), plans the tasks, executes them (here, or on Ray), and returns `Results`: the typed rows
-(`benchmark.schema.Row`), the settings they point at, and `table()`. With `out` it also writes
+(`benchmark.results.schema.Row`), the settings they point at, and `table()`. With `out` it also writes
 results.json, table.md, table.csv, pictures and charts there, as the CLI does. `plan` is the dry
 run: which tasks are cached, which would be computed, and what they cost when last measured.
 
 Attackers may be registered names, 'path/file.py:Class' specs, or Python objects: an
-`attacks.Restorer` / `attacks.Reader` subclass or instance (see `benchmark.attacker_objects` for
+`attacks.Restorer` / `attacks.Reader` subclass or instance (see `benchmark.runner.attacker_objects` for
 how they reach the tasks; an instance runs only with the local executor).
 """
 
@@ -33,17 +33,17 @@ from typing import TYPE_CHECKING, Any
 
 import attacks
 import lenses
-from benchmark import attacker_objects, executors, runner, task_costs
-from benchmark.cache import cache_root
-from benchmark.known_warnings import silence_known_warnings
-from benchmark.planning import AttackerRef, plan as plan_tasks, run_directory
-from benchmark.profiles import Profile, get_profile
-from benchmark.provenance import git_commit
-from benchmark.run_config import RunConfig, training_scenes
+from benchmark.runner import attacker_objects, executors, runner, task_costs
+from benchmark.store.cache import cache_root
+from benchmark.runner.diagnostics.known_warnings import silence_known_warnings
+from benchmark.runner.planning import AttackerRef, plan as plan_tasks, run_directory
+from benchmark.store.profiles import Profile, get_profile
+from benchmark.store.provenance import git_commit
+from benchmark.runner.config import RunConfig, training_scenes
 from benchmark.scenes import PLATE_FORMAT, SCENE_SETS, load_scenes, plate_entropy_bits
-from benchmark.schema import Row, read_results, write_results
-from benchmark.schema import Results as ResultsFile
-from benchmark.tasks import is_cached
+from benchmark.results.schema import Row, read_results, write_results
+from benchmark.results.schema import Results as ResultsFile
+from benchmark.runner.tasks import is_cached
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -98,7 +98,7 @@ class Results:
     """What a run produced.
 
     Attributes:
-        rows: One `benchmark.schema.Row` per lens x attack chain x seed (failed attackers included,
+        rows: One `benchmark.results.schema.Row` per lens x attack chain x seed (failed attackers included,
             with status "failed" and their error).
         settings: Settings hash -> the lens and attacker settings the rows point at.
         meta: The run: profile settings, executor, wall time (s), and what the caller added.
@@ -148,7 +148,7 @@ class Results:
         return pd.DataFrame.from_records(records, columns=columns)
 
     def write(self, path: Path) -> Path:
-        """Write the rows, settings and meta as a results.json (`benchmark.schema`)."""
+        """Write the rows, settings and meta as a results.json (`benchmark.results.schema`)."""
         return write_results(Path(path), ResultsFile(self.rows, self.settings, self.meta))
 
     @classmethod
@@ -316,9 +316,9 @@ def prepare_out(path: Path | None) -> tuple[Path, bool]:
 
 def write_run_outputs(out: Path, results: Results) -> None:
     """results.json (schema rows + their settings), tables, pictures and charts of a run."""
-    from benchmark import report
-    from benchmark.charts.run_charts import write_run_charts
-    from benchmark.observer.published import write_run_check
+    from benchmark.results import run_tables as report
+    from benchmark.results.charts.run_charts import write_run_charts
+    from benchmark.results.observer.published import write_run_check
     results.write(out / "results.json")
     output = results.output
     assert output is not None, "only a run's own results carry its pictures and plate records"
@@ -339,7 +339,7 @@ class PlannedTask:
 
     Attributes:
         key: The task's key (its folder in the run's cache).
-        kind, seed, lens: What the task is (`benchmark.planning.Task`).
+        kind, seed, lens: What the task is (`benchmark.runner.planning.Task`).
         attackers: Names of the restorers and readers it runs.
         cached: True when its result is in the cache (the run reads it), False when it would be computed.
         recorded_s: For a cached task, the wall time (s) it took when computed, if recorded.

@@ -47,7 +47,7 @@ def _device(text: str) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from benchmark.profiles import PROFILES
+    from benchmark.store.profiles import PROFILES
     from lenses.mask_export import FORMATS as MASK_FORMATS
     parser = argparse.ArgumentParser(prog="python -m benchmark", description=__doc__)
     loudness = parser.add_mutually_exclusive_group()
@@ -92,7 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     pre.add_argument("--profile", default="quick", choices=list(PROFILES), help="recipe and val set (default: quick)")
     pre.add_argument("--seed", type=int, default=0, help="training seed, and the seed of the val scenes (default 0)")
     pre.add_argument("--out", type=Path, default=None,
-                     help="weights folder (default: the package's benchmark/utility/weights)")
+                     help="weights folder (default: the package's benchmark/codesign/utility/weights)")
     pre.add_argument("--dir", type=Path, default=None,
                      help="leaderboard folder for the study and chart (default: the repository's)")
     pre.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
@@ -148,8 +148,8 @@ def _codesign_lenses() -> list[str]:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from benchmark.cache import cache_root
-    from benchmark.profiles import get_profile
+    from benchmark.store.cache import cache_root
+    from benchmark.store.profiles import get_profile
     from benchmark.codesign.builtin import START_SPEC
     from benchmark.codesign.distributed import session
     from benchmark.codesign.schemes import SCHEMES
@@ -186,8 +186,9 @@ def cmd_list() -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from benchmark import api, profiling
-    from benchmark.profiles import get_profile
+    from benchmark import api
+    from benchmark.runner.diagnostics import profiling
+    from benchmark.store.profiles import get_profile
 
     options = dict(lenses=args.lens, attacks=args.attack, profile=args.profile, seeds=args.seeds,
                    scenes=args.scenes, device=args.device, executor=args.executor,
@@ -203,7 +204,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         results = api.run(**options, out=out, meta={"command": sys.argv})
     print((out / "table.md").read_text())
     if args.publish:
-        from benchmark import leaderboard
+        from benchmark.publish import leaderboard
         output = results.output
         paths = leaderboard.publish_run(output.rows, get_profile(args.profile).to_dict(), output.lens_info, out,
                                         settings=output.settings)
@@ -226,13 +227,14 @@ def report_failures(failed: list) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from benchmark import leaderboard_entries, leaderboard_report
+    from benchmark.results import entries as leaderboard_entries
+    from benchmark.publish import report as leaderboard_report
     directory = args.dir or leaderboard_entries.LEADERBOARD
     if not (directory / "entries").is_dir():
         raise ValueError(f"no leaderboard entries in {directory / 'entries'}; publish some with "
                          "`python -m benchmark run --lens NAME --publish`")
     if args.publish:
-        from benchmark import leaderboard
+        from benchmark.publish import leaderboard
         for run in args.publish:
             for path in leaderboard.publish_results(run, directory):
                 print(f"published {path} from {run}")
@@ -247,9 +249,10 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_study(args: argparse.Namespace) -> int:
-    from benchmark import leaderboard_entries, leaderboard_report
-    from benchmark.profiles import get_profile
-    from benchmark.sensing import to_tensor
+    from benchmark.results import entries as leaderboard_entries
+    from benchmark.publish import report as leaderboard_report
+    from benchmark.store.profiles import get_profile
+    from benchmark.runner.sensing import to_tensor
     from benchmark.scenes.loading import load_scene
     from benchmark.studies import psf_grid, utility_size
     directory = args.dir or leaderboard_entries.LEADERBOARD
@@ -271,7 +274,7 @@ def mask_spec(name: str, profile: str, seed: int):
     spec, or a registered lens (a co-designed one is trained, or taken from the cache, for
     `profile` and `seed`) with its current coefficients."""
     import lenses
-    from benchmark.profiles import get_profile
+    from benchmark.store.profiles import get_profile
     if name.endswith(".json"):
         path = Path(name)
         if not path.is_file():
@@ -296,23 +299,23 @@ def cmd_export_mask(args: argparse.Namespace) -> int:
 
 
 def cmd_pretrain_attacker(args: argparse.Namespace) -> int:
-    from benchmark.attack_weights import main as ship_main
+    from benchmark.publish.ship_attacker import main as ship_main
     return ship_main(args=args)
 
 
 def cmd_ship_lens(args: argparse.Namespace) -> int:
-    from benchmark.lens_shipping import main as ship_main
+    from benchmark.publish.ship_lens import main as ship_main
     return ship_main(args=args)
 
 
 def cmd_pretrain(args: argparse.Namespace) -> int:
-    from benchmark.utility.pretrain import main as pretrain_main
+    from benchmark.codesign.utility.pretrain import main as pretrain_main
     return pretrain_main(args=args)
 
 
 def main(argv: list[str] | None = None) -> int:
     from lenses.registry import DuplicateNameError
-    from benchmark.known_warnings import silence_known_warnings
+    from benchmark.runner.diagnostics.known_warnings import silence_known_warnings
     silence_known_warnings()
     parser = build_parser()
     args = parser.parse_args(argv)

@@ -1,4 +1,6 @@
-"""The layers hold: lenses (physics) <- attacks <- benchmark, and no module imports itself back.
+"""The layers hold: lenses (physics) <- attacks <- benchmark, inside benchmark one strict order of its
+stage packages (store <- scenes <- results <- codesign <- runner <- studies <- publish <- api <- cli),
+and no module imports itself back.
 
 Reads every .py file of the three packages with `ast` (no import is executed), so an import
 hidden inside a function counts as much as one at the top.
@@ -13,6 +15,9 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("lenses", "attacks", "benchmark")
 # What each package may import of ours (anything else of ours is a backward arrow).
 ALLOWED = {"lenses": {"lenses"}, "attacks": {"lenses", "attacks"}, "benchmark": {"lenses", "attacks", "benchmark"}}
+# benchmark's stages, bottom to top: each may import only itself and those before it. The package
+# root (`benchmark/__init__.py`, `__main__.py`) stands above them all.
+STAGES = ("store", "scenes", "results", "codesign", "runner", "studies", "publish", "api", "cli")
 
 
 def module_name(path: Path) -> str:
@@ -64,6 +69,31 @@ def backward_imports(graph: dict[str, set[str]]) -> list[str]:
     return bad
 
 
+def stage(module: str) -> str | None:
+    """The stage of a benchmark module (its first name below `benchmark`), or None for the package root."""
+    parts = module.split(".")
+    if parts[0] != "benchmark" or len(parts) < 2 or parts[1] == "__main__":
+        return None
+    return parts[1]
+
+
+def stage_violations(graph: dict[str, set[str]]) -> list[str]:
+    """Imports from a benchmark stage to a later one in STAGES (or to a folder STAGES does not name)."""
+    bad = []
+    for name, deps in sorted(graph.items()):
+        here = stage(name)
+        if here is None:
+            continue
+        for d in sorted(deps):
+            there = stage(d)
+            if there is None and d.startswith("benchmark"):
+                bad.append(f"{name} -> {d} (the package root)")
+            elif there is not None and (here not in STAGES or there not in STAGES
+                                        or STAGES.index(there) > STAGES.index(here)):
+                bad.append(f"{name} -> {d}")
+    return bad
+
+
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     """Strongly connected components of more than one module (Tarjan)."""
     index: dict[str, int] = {}
@@ -107,13 +137,32 @@ def test_no_import_cycle():
     assert cycles(import_graph()) == []
 
 
+def test_benchmark_stages_in_one_strict_order():
+    assert stage_violations(import_graph()) == []
+
+
+def test_every_entry_of_benchmark_is_a_named_stage():
+    entries = {p.stem for p in (ROOT / "benchmark").iterdir() if p.name not in ("__init__.py", "__main__.py",
+                                                                               "py.typed", "__pycache__")}
+    assert entries == set(STAGES)
+
+
+def test_stage_check_fails_on_a_planted_backward_import():
+    graph = import_graph()
+    planted = {**graph, "benchmark.results.schema": graph["benchmark.results.schema"] | {"benchmark.runner.tasks"}}
+    assert stage_violations(planted) == ["benchmark.results.schema -> benchmark.runner.tasks"]
+    planted = {**graph, "benchmark.store.cache": {"benchmark.publish.report"}, "benchmark.codesign.trainer": {"benchmark"}}
+    assert stage_violations(planted) == ["benchmark.codesign.trainer -> benchmark (the package root)",
+                                         "benchmark.store.cache -> benchmark.publish.report"]
+
+
 def test_the_checks_catch_what_they_look_for():
-    graph = {"lenses.optics": {"attacks.base"}, "attacks.base": {"benchmark.cache"}, "benchmark.a": {"benchmark.b"},
+    graph = {"lenses.optics": {"attacks.base"}, "attacks.base": {"benchmark.store.cache"}, "benchmark.a": {"benchmark.b"},
              "benchmark.b": {"benchmark.c"}, "benchmark.c": {"benchmark.a"}}
-    assert backward_imports(graph) == ["attacks.base -> benchmark.cache", "lenses.optics -> attacks.base"]
+    assert backward_imports(graph) == ["attacks.base -> benchmark.store.cache", "lenses.optics -> attacks.base"]
     assert cycles(graph) == [["benchmark.a", "benchmark.b", "benchmark.c"]]
 
 
-@pytest.mark.parametrize("name", ["benchmark.runner", "benchmark.tasks", "attacks.restorer_training"])
+@pytest.mark.parametrize("name", ["benchmark.runner.runner", "benchmark.runner.tasks", "attacks.restorer_training"])
 def test_graph_sees_real_imports(name):
     assert import_graph()[name], f"{name} imports nothing of ours? the ast walk is broken"

@@ -8,7 +8,7 @@ input comes back, whichever chain or reader asks:
 * vehicles (``lpdr``): the segmentation of an image, per segmenter and image content
   (``vehicles_memo``). An attacker finds vehicles on the image it attacks, with the network its
   threat model gives it: the lens's own network on sensor images, the clean one on restored
-  images (``benchmark.evaluation.run_reader``). So boxes are shared only between requests for the
+  images (``benchmark.runner.evaluation.run_reader``). So boxes are shared only between requests for the
   same network on byte-identical images: the chain whose restorer returns the sensor image
   unchanged (``raw``) and a reader run twice on one image. Boxes are never carried from one image to
   another (e.g. from the sensor image to a restorer's output, or from a frame to its windows): that

@@ -28,10 +28,10 @@ from tqdm.auto import tqdm
 
 from attacks.networks.red10 import RED10
 from attacks.restorer_training import TRAINING_LAYOUT
-from benchmark.cache import config_hash
+from benchmark.store.cache import config_hash
 from benchmark.codesign.artifacts import load_weights, read_json, save_weights, write_json
 from benchmark.codesign.data import CropSampler, step_generator
-from benchmark.metrics import psnr
+from benchmark.results.metrics import psnr
 from lenses.lens import Lens
 
 log = logging.getLogger(__name__)

@@ -2,7 +2,7 @@
 
 Checkpoints hold tensors, numbers and lists only and are read back with
 `torch.load(..., weights_only=True)`; final network weights are safetensors. Every file carries
-the cache's SHA-256 sidecar (`benchmark.cache`): a missing, truncated or corrupt one is reported
+the cache's SHA-256 sidecar (`benchmark.store.cache`): a missing, truncated or corrupt one is reported
 with its path, removed and read as absent, so its producer trains it again. A finished run is a
 directory that appears in one `os.replace`, so a reader sees all of it or nothing.
 """
@@ -17,15 +17,8 @@ from typing import Any, TypeVar
 
 import torch
 
-from benchmark.cache import (
-    read_verified,
-    read_verified_checkpoint,
-    read_verified_json,
-    read_verified_tensors,
-    write_verified_checkpoint,
-    write_verified_json,
-    write_verified_tensors,
-)
+from benchmark.store.cache import (read_verified, read_verified_checkpoint, read_verified_json, read_verified_tensors, write_verified_checkpoint,
+                                   write_verified_json, write_verified_tensors)
 
 log = logging.getLogger(__name__)
 

@@ -189,7 +189,7 @@ class InformationBound(Balance):
     profile_fields = ("bound_scenes",)
 
     def prepare(self, cache_dir: Path, profile: Any, seed: int, replicas: SingleProcess) -> None:
-        from benchmark.plate_spectrum import cached_plate_spectrum
+        from benchmark.scenes.plate_spectrum import cached_plate_spectrum
         from benchmark.scenes import plate_entropy_bits
         spectrum = replicas.writer_first(lambda: cached_plate_spectrum(cache_dir, profile.bound_scenes, seed=seed))
         # Frozen dataclass: the loaded data is state of this run, not a setting.

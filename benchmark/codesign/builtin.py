@@ -30,8 +30,8 @@ def attach(trained: TrainedLens) -> Lens:
 def codesigned(scheme: str, profile: Any = None, seed: int = 0, device: str = "cpu",
                cache_dir: Path | None = None, progress: bool = True, scenes: str = "synthetic", **_: Any) -> Lens:
     """Train (or load from the cache) the lens of `scheme` for this profile, seed and training scenes."""
-    from benchmark.cache import cache_root
-    from benchmark.profiles import get_profile
+    from benchmark.store.cache import cache_root
+    from benchmark.store.profiles import get_profile
     run = CoDesign(load_spec(START_SPEC), SCHEMES[scheme], profile or get_profile("quick"), seed, device,
                    Path(cache_dir) if cache_dir else cache_root(), scene_set=scenes)
     return attach(run.load_or_train(progress=progress))

@@ -20,8 +20,8 @@ from typing import Any
 
 from torch.utils.tensorboard import SummaryWriter
 
-from benchmark.cache import seal, write_verified
-from benchmark.charts import new_figure, save_figure
+from benchmark.store.cache import seal, write_verified
+from benchmark.results.charts import new_figure, save_figure
 from benchmark.codesign.coefficients import NOLL_NAMES
 
 # TensorBoard groups: prefix of a stat's name -> folder of its tag.

@@ -13,7 +13,7 @@ check (the lens's own utility net scored on a few val scenes through the lens) t
 ``tests/benchmark/codesign/test_shipped_lens.py`` re-measures. A file whose size or sha256 differs
 raises ``ShippedLensError`` naming it (a damaged install is reported, not trained around).
 
-Made by ``python -m benchmark ship-lens NAME`` (``benchmark.lens_shipping``).
+Made by ``python -m benchmark ship-lens NAME`` (``benchmark.publish.ship_lens``).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from attacks.shipped_weights import key_text, read_checked
-from benchmark.cache import write_verified
+from benchmark.store.cache import write_verified
 from benchmark.codesign.artifacts import publish_directory
 from benchmark.codesign.curves import PUBLISHED_FILES
 

@@ -32,18 +32,9 @@ import torch
 import torch.nn.functional as F
 from tqdm.auto import tqdm
 
-from benchmark.cache import config_hash, discard, write_verified
+from benchmark.store.cache import config_hash, discard, write_verified
 from benchmark.codesign.adversary import MARGIN_DB, Probe, build_adversary, pretrain_adversary
-from benchmark.codesign.artifacts import (
-    load_checkpoint,
-    load_weights,
-    publish_directory,
-    read_json,
-    save_checkpoint,
-    save_weights,
-    verified,
-    write_json,
-)
+from benchmark.codesign.artifacts import load_checkpoint, load_weights, publish_directory, read_json, save_checkpoint, save_weights, verified, write_json
 from benchmark.codesign.balancing import Balance, OpticsContext, settings
 from benchmark.codesign.coefficients import INITIAL_AMPLITUDE_UM, NOLL_NAMES, bound_limited, initial_coefficients
 from benchmark.codesign.curves import PUBLISHED_FILES, CurveLog
@@ -51,8 +42,8 @@ from benchmark.codesign.data import CropSampler, step_generator
 from benchmark.codesign.replicas import SingleProcess
 from benchmark.codesign.schemes import Scheme
 from benchmark.codesign.shipped import install_shipped
-from benchmark.utility.clean import clean_utility_id, clean_utility_net
-from benchmark.utility.segformer import build_segformer, segment_logits
+from benchmark.codesign.utility.clean import clean_utility_id, clean_utility_net
+from benchmark.codesign.utility.segformer import build_segformer, segment_logits
 from lenses.lens import Lens
 from lenses.spec import LensSpec, load_spec, spec_to_toml
 

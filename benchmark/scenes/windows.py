@@ -7,7 +7,7 @@ sliding window, so it sees as much context per tile as on a full frame). Only th
 plate is scored in it; a plate whose window overlaps another's is still one sample, once.
 
 How the window's sensor image is made equal to the full frame's inside it:
-``benchmark.sensing.sense_windows``.
+``benchmark.runner.sensing.sense_windows``.
 """
 
 from __future__ import annotations

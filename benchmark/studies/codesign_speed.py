@@ -30,9 +30,9 @@ from benchmark.codesign import trainer
 from benchmark.codesign import adversary
 from benchmark.codesign.builtin import START_SPEC
 from benchmark.codesign.schemes import SCHEMES
-from benchmark.profiles import get_profile
-from benchmark.provenance import provenance
-from benchmark.utility.segformer import build_segformer
+from benchmark.store.profiles import get_profile
+from benchmark.store.provenance import provenance
+from benchmark.codesign.utility.segformer import build_segformer
 from lenses.spec import load_spec
 
 

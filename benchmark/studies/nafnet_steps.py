@@ -29,13 +29,13 @@ import torch
 
 import lenses
 from attacks.restorer_training import RestorerBudget, collect_pairs, random_crops, train_restorer
-from benchmark.cache import atomic_write_text, cache_root
-from benchmark.metrics import psnr
-from benchmark.profiles import Profile, get_profile
-from benchmark.provenance import provenance
-from benchmark.run_config import RunConfig
+from benchmark.store.cache import atomic_write_text, cache_root
+from benchmark.results.metrics import psnr
+from benchmark.store.profiles import Profile, get_profile
+from benchmark.store.provenance import provenance
+from benchmark.runner.config import RunConfig
 from benchmark.scenes import load_scenes
-from benchmark.sensing import batches, sense, to_tensor, train_pairs_factory
+from benchmark.runner.sensing import batches, sense, to_tensor, train_pairs_factory
 
 CHECKPOINTS = (25, 50, 100, 150, 200, 300, 400, 500, 600, 700, 800)
 TAIL_FRACTION = 0.2
@@ -143,7 +143,7 @@ def run(json_path: Path, chart_path: Path | None, profile: Profile, lens_name: s
 
     body = write(measure(profile, lens_name, seed, checkpoints, eval_hw=eval_hw, on_record=write), complete=True)
     if chart_path is not None:
-        from benchmark.charts.nafnet_steps import write_nafnet_steps_chart
+        from benchmark.results.charts.nafnet_steps import write_nafnet_steps_chart
         write_nafnet_steps_chart(body, chart_path)
     return body
 
@@ -160,7 +160,7 @@ def _body(records: list[dict[str, float]], profile: Profile, lens_name: str, see
 
 
 def main(argv: list[str] | None = None) -> int:
-    from benchmark.leaderboard_entries import LEADERBOARD
+    from benchmark.results.entries import LEADERBOARD
     parser = argparse.ArgumentParser(prog="python -m benchmark.studies.nafnet_steps", description=__doc__)
     parser.add_argument("--profile", default="quick", help="profile whose NAFNet size and data are used")
     parser.add_argument("--lens", default="defocus")

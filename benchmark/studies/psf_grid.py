@@ -29,9 +29,9 @@ from typing import Any
 
 import torch
 
-from benchmark.cache import atomic_write_text
-from benchmark.metrics import psnr
-from benchmark.provenance import provenance
+from benchmark.store.cache import atomic_write_text
+from benchmark.results.metrics import psnr
+from benchmark.store.provenance import provenance
 from lenses.convolve import convolve
 from lenses.optics import Geometry, PupilModel, choose_geometry, pupil_samples_for, worst_case_coefficients
 from lenses.spec import LensSpec, load_spec

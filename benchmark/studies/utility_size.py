@@ -1,7 +1,7 @@
 """Utility model size study: SegFormer variants each trained to its plateau, scored on the same scenes.
 
 Each variant is pre-trained on sharp scenes exactly as a profile's clean utility net
-(:func:`benchmark.utility.pretrain.train`: the profile's ``pretrain_*`` recipe, its learning curve
+(:func:`benchmark.codesign.utility.pretrain.train`: the profile's ``pretrain_*`` recipe, its learning curve
 and plateau verdict; cached by the recipe's hash) and then scored by the runner's segmenter on the
 profile's sharp val scenes: mIoU, mean and overall accuracy with their scene-bootstrap 95 %
 intervals, per-class IoU, parameters, inference images/s, and the seconds training took (from the
@@ -28,17 +28,17 @@ from typing import Any
 import numpy as np
 import torch
 
-from benchmark import stats
-from benchmark.cache import atomic_write_text, cache_root
-from benchmark.intervals import pooled_score_interval
-from benchmark.profiles import Profile
-from benchmark.provenance import provenance
-from benchmark.run_config import RunConfig
+from benchmark.results import stats
+from benchmark.store.cache import atomic_write_text, cache_root
+from benchmark.runner.intervals import pooled_score_interval
+from benchmark.store.profiles import Profile
+from benchmark.store.provenance import provenance
+from benchmark.runner.config import RunConfig
 from benchmark.scenes import CLASS_NAMES, load_scenes
-from benchmark.sensing import to_tensor
-from benchmark.utility import clean, pretrain
-from benchmark.utility.measure import utility_scores
-from benchmark.utility.scoring import scores
+from benchmark.runner.sensing import to_tensor
+from benchmark.codesign.utility import clean, pretrain
+from benchmark.runner.utility_measure import utility_scores
+from benchmark.codesign.utility.scoring import scores
 
 VARIANTS = ("tiny", "b0-narrow", "b0")
 SCORES = ("miou", "mean_acc", "overall_acc")

@@ -13,7 +13,7 @@ import attacks
 import lenses
 from attacks.lpdr import Lpdr, LpdrOracle, StageTrace
 from attacks.plates import easyocr_models
-from benchmark.plate_scoring import readable, score_scene
+from benchmark.results.plate_scoring import readable, score_scene
 from benchmark.scenes import load_scenes
 
 LARGE_PX = 120
@@ -121,7 +121,7 @@ def test_segmentation_reader_uses_the_segment_hint(large_plate_scenes):
     assert reader.last_trace[0].vehicles  # components of the car / truck / bus labels
     # The large plate on that vehicle is found and read to within a character (the exact-read
     # accuracy of each detector is measured by the large-plate tests).
-    from benchmark.plate_scoring import score_scene
+    from benchmark.results.plate_scoring import score_scene
     large = [o for o in score_scene(reads[0], scenes[0]) if o.width_px >= LARGE_PX]
     assert large and all(o.detected and o.cer <= 1 / 7 + 1e-9 for o in large), large
 

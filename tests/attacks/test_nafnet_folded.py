@@ -7,7 +7,7 @@ from attacks.networks.nafnet import NAFBlock, NAFNet
 from attacks.networks.nafnet_folded import FoldedNAFBlock, fold_for_inference
 from attacks.onnx_backend import InferenceEngine
 from attacks.restorer_training import RestorerBudget
-from benchmark.profiles import PROFILES
+from benchmark.store.profiles import PROFILES
 
 TINY = dict(width=8, middle_blk_num=1, enc_blk_nums=(1, 2), dec_blk_nums=(2, 1))
 

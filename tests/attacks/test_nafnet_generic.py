@@ -8,7 +8,7 @@ import pytest
 import torch
 
 import attacks
-from benchmark.cache import ArtifactCache
+from benchmark.store.cache import ArtifactCache
 from attacks.degradations import degrade, disk_kernel, gaussian_kernel, motion_kernel, random_kernels
 from attacks.gray_world import gray_world_balance
 from attacks.networks import NAFNet

@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 
 import attacks
-from benchmark.cache import ArtifactCache
+from benchmark.store.cache import ArtifactCache
 from attacks.networks import NAFNet
 from attacks.restorer_training import negative_psnr, random_crops, train_restorer
 

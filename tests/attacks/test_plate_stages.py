@@ -12,7 +12,7 @@ from attacks.plates.detect_opencv import detect_opencv
 from attacks.plates.easyocr_models import load_easyocr, model_dir
 from attacks.plates.ocr import apply_format, normalise, prepare_crop, read_plate, read_plates
 from attacks.plates.vehicles import expand_box, oracle_vehicles, segmentation_vehicles
-from benchmark.plate_scoring import iou
+from benchmark.results.plate_scoring import iou
 from benchmark.scenes import render_plate
 
 PLATE_TEXT = "KD482MX"

@@ -21,11 +21,11 @@ import torch
 
 import attacks
 import lenses
-from benchmark.metrics import finite_mean, psnr
-from benchmark.profiles import PROFILES
-from benchmark.cache import ArtifactCache
-from benchmark.run_config import RunConfig
-from benchmark.sensing import sense, to_tensor, train_pairs_factory
+from benchmark.results.metrics import finite_mean, psnr
+from benchmark.store.profiles import PROFILES
+from benchmark.store.cache import ArtifactCache
+from benchmark.runner.config import RunConfig
+from benchmark.runner.sensing import sense, to_tensor, train_pairs_factory
 from benchmark.scenes import load_scenes
 
 PROFILE = PROFILES["smoke"]

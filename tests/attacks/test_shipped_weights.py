@@ -12,7 +12,7 @@ import attacks
 from attacks import shipped_weights
 from attacks.restorer_training import data_identity
 from attacks.shipped_weights import ShippedWeightsError, find_shipped, same_data, write_shipped
-from benchmark.cache import ArtifactCache
+from benchmark.store.cache import ArtifactCache
 
 
 def _pairs():
@@ -97,8 +97,8 @@ def test_shipped_weights_are_what_the_fit_trains_and_replace_it(fake_lens, tmp_p
 
 
 def test_the_shipped_quick_model_is_the_one_a_quick_run_asks_for_and_scores_its_record(tmp_path):
-    from benchmark.attack_weights import check_scores, generic_context
-    from benchmark.profiles import get_profile
+    from benchmark.publish.ship_attacker import check_scores, generic_context
+    from benchmark.store.profiles import get_profile
     ctx = generic_context(get_profile("quick"), 0, tmp_path)
     attacker = attacks.load("nafnet-generic", backend="torch")
     attacker.fit(ctx)

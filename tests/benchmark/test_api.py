@@ -17,10 +17,11 @@ from skimage.metrics import peak_signal_noise_ratio
 
 import attacks
 import benchmark
-from benchmark import api, attacker_objects
-from benchmark.profiles import get_profile
+from benchmark import api
+from benchmark.runner import attacker_objects
+from benchmark.store.profiles import get_profile
 from benchmark.scenes import load_scenes
-from benchmark.schema import Row
+from benchmark.results.schema import Row
 
 ROOT = Path(__file__).resolve().parents[2]
 

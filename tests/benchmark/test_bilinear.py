@@ -8,8 +8,8 @@ import torch.nn.functional as F
 from transformers import SegformerForSemanticSegmentation
 from transformers.models.segformer.modeling_segformer import SegformerDecodeHead
 
-from benchmark.utility.bilinear import bilinear_weights, resize_bilinear, resize_for_training
-from benchmark.utility.segformer import TrainingDecodeHead, build_segformer, segment_logits
+from benchmark.codesign.utility.bilinear import bilinear_weights, resize_bilinear, resize_for_training
+from benchmark.codesign.utility.segformer import TrainingDecodeHead, build_segformer, segment_logits
 
 SIZES = [((4, 4), (32, 32)), ((8, 16), (32, 64)), ((13, 7), (50, 25)), ((25, 25), (100, 100)),
          ((32, 32), (32, 32)), ((9, 12), (9, 40)), ((40, 30), (17, 11)), ((1, 5), (6, 5))]

@@ -5,8 +5,8 @@ import time
 
 import pytest
 
-from benchmark.budget import BudgetExceeded, time_budget
-from benchmark.evaluation import attempt
+from benchmark.runner.budget import BudgetExceeded, time_budget
+from benchmark.runner.evaluation import attempt
 
 
 def test_a_step_past_its_budget_is_ended_with_its_name():

@@ -4,7 +4,7 @@ import logging
 import multiprocessing
 import time
 
-from benchmark.cache import ArtifactCache, exclusive, read_verified, write_verified
+from benchmark.store.cache import ArtifactCache, exclusive, read_verified, write_verified
 
 
 def test_verified_round_trip_and_corruption_is_reported_and_removed(tmp_path, caplog):

@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from benchmark.schema import read_results
+from benchmark.results.schema import read_results
 
 PROVENANCE = {"git_commit", "packages", "device", "threads", "wall_s", "date"}
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from benchmark import cli
-from benchmark.leaderboard_entries import LEADERBOARD
+from benchmark.results.entries import LEADERBOARD
 from lenses.zernike import zernike_noll
 
 ENTRY = LEADERBOARD / "entries" / "gp__quick__synthetic.json"

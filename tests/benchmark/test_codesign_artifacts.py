@@ -10,13 +10,13 @@ from pathlib import Path
 import pytest
 import torch
 
-from benchmark.cache import read_verified
+from benchmark.store.cache import read_verified
 from benchmark.codesign.builtin import START_SPEC
 from benchmark.codesign.schemes import SCHEMES
 from benchmark.codesign.trainer import CoDesign
-from benchmark.plate_spectrum import cached_plate_spectrum
-from benchmark.profiles import PROFILES
-from benchmark.utility import pretrain
+from benchmark.scenes.plate_spectrum import cached_plate_spectrum
+from benchmark.store.profiles import PROFILES
+from benchmark.codesign.utility import pretrain
 from lenses.spec import load_spec
 
 # The smallest profile that runs every part: clean pre-training, adversary pre-training, co-design.

@@ -2,7 +2,7 @@
 
 import pytest
 
-from benchmark.profiles import get_profile
+from benchmark.store.profiles import get_profile
 from benchmark.studies.codesign_speed import time_codesign_steps
 
 

@@ -3,7 +3,7 @@
 import subprocess
 import sys
 
-from benchmark.schema import read_results
+from benchmark.results.schema import read_results
 
 # Timing, and provenance that names when and at which commit rather than what was measured.
 TIMING = {"fit_s", "images_per_s", "wall_s", "date", "git_commit"}

@@ -10,9 +10,9 @@ import torch
 
 import attacks
 import benchmark
-from benchmark.schema import read_results
+from benchmark.results.schema import read_results
 
-# The smoke plan of one fixed lens and one restorer, in plan order (benchmark.planning.plan).
+# The smoke plan of one fixed lens and one restorer, in plan order (benchmark.runner.planning.plan).
 TASKS = ["clean-utility_s0", "spectrum_s0", "sharp_s0", "lens_s0_ideal", "utility_s0_ideal", "bound_s0_ideal",
          "fit_s0_ideal_identity", "evaluate_s0_ideal"]
 LINE = re.compile(r"^  (\S+)\s+(cached|compute)\s+(.*)$")

@@ -7,10 +7,10 @@ import pytest
 import torch
 
 import attacks
-from benchmark.evaluation import OutputError, attempt, check_reads, check_restored, read_plates, restoration_metrics
+from benchmark.runner.evaluation import OutputError, attempt, check_reads, check_restored, read_plates, restoration_metrics
 from benchmark.scenes import load_scenes
-from benchmark.metrics import finite_mean
-from benchmark.schema import RowError
+from benchmark.results.metrics import finite_mean
+from benchmark.results.schema import RowError
 
 SENSOR = torch.rand(2, 3, 24, 32, generator=torch.Generator().manual_seed(0))
 

@@ -1,5 +1,5 @@
 """A trained attacker is fitted once and shared by its chains, a second run loads it instead of refitting,
-and a profiled run (benchmark/profiling.py) says where its time went.
+and a profiled run (benchmark/runner/diagnostics/profiling.py) says where its time went.
 
 Two smoke runs on one cache; the second has another attacker set (hence its own task folder, every
 task recomputed) and is profiled.
@@ -12,9 +12,10 @@ import json
 import pytest
 
 import attacks.restorer_training
-from benchmark import profiling, runner
-from benchmark.profiles import get_profile
-from benchmark.run_config import RunConfig
+from benchmark.runner.diagnostics import profiling
+from benchmark.runner import runner
+from benchmark.store.profiles import get_profile
+from benchmark.runner.config import RunConfig
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +106,7 @@ def test_python_allocations_are_traced_only_when_asked():
     """tracemalloc slows Python-heavy tasks by about a third: off unless asked, and the report says so."""
     import tracemalloc
 
-    from benchmark.planning import Task
+    from benchmark.runner.planning import Task
 
     seen = {}
     for trace in (False, True):

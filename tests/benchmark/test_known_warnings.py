@@ -8,13 +8,13 @@ import sys
 
 import pytest
 
-from benchmark.known_warnings import KNOWN_WARNINGS
+from benchmark.runner.diagnostics.known_warnings import KNOWN_WARNINGS
 
 READ_ONE_PLATE = """
 import sys, warnings
 warnings.simplefilter("always")  # show every warning, also the DeprecationWarnings Python hides by default
 if sys.argv[1] == "silenced":
-    from benchmark.known_warnings import silence_known_warnings
+    from benchmark.runner.diagnostics.known_warnings import silence_known_warnings
     silence_known_warnings()
 import numpy as np
 from attacks.plates.easyocr_models import load_easyocr
@@ -56,7 +56,7 @@ def test_each_filter_is_scoped_to_a_message_and_a_module_and_says_why():
 def test_other_warnings_of_the_same_modules_still_show():
     import warnings
 
-    from benchmark.known_warnings import silence_known_warnings
+    from benchmark.runner.diagnostics.known_warnings import silence_known_warnings
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
         silence_known_warnings()

@@ -1,13 +1,14 @@
-"""The findings table decides each claim by a paired comparison of per-unit outcomes (benchmark.findings)."""
+"""The findings table decides each claim by a paired comparison of per-unit outcomes (benchmark.publish.findings)."""
 
 import numpy as np
 import pytest
 from scipy import stats as sps
 
-from benchmark import findings, stats
-from benchmark.leaderboard_entries import make_entry
-from benchmark.leaderboard_tables import findings_lines, findings_table
-from benchmark.schema import Row, Units
+from benchmark.publish import findings
+from benchmark.results import stats
+from benchmark.results.entries import make_entry
+from benchmark.publish.tables import findings_lines, findings_table
+from benchmark.results.schema import Row, Units
 
 PROFILE = "quick"
 

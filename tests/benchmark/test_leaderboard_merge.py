@@ -4,9 +4,10 @@ import json
 
 import pytest
 
-from benchmark import leaderboard, leaderboard_entries
-from benchmark.leaderboard_entries import Entry
-from benchmark.schema import Row
+from benchmark.publish import leaderboard
+from benchmark.results import entries as leaderboard_entries
+from benchmark.results.entries import Entry
+from benchmark.results.schema import Row
 
 PROFILE = {"name": "smoke", "n_val": 4, "image_size": (128, 256)}  # a tuple, as Profile.to_dict() gives
 

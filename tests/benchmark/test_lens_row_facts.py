@@ -7,12 +7,12 @@ import types
 from benchmark.codesign.builtin import START_SPEC
 from benchmark.codesign.schemes import SCHEMES
 from benchmark.codesign.trainer import CoDesign
-from benchmark.leaderboard_entries import make_entry
-from benchmark.leaderboard_tables import main_table
-from benchmark.profiles import get_profile
-from benchmark.rows import training_facts
-from benchmark.run_pictures import training_curves
-from benchmark.schema import Row
+from benchmark.results.entries import make_entry
+from benchmark.publish.tables import main_table
+from benchmark.store.profiles import get_profile
+from benchmark.runner.rows import training_facts
+from benchmark.runner.pictures import training_curves
+from benchmark.results.schema import Row
 from lenses.spec import load_spec
 
 

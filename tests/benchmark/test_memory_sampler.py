@@ -1,4 +1,4 @@
-"""The peak sampler (benchmark/memory_sampler.py) names the code that holds the memory at a task's peak.
+"""The peak sampler (benchmark/runner/diagnostics/memory_sampler.py) names the code that holds the memory at a task's peak.
 
 An injected fault: a function that allocates and touches 256 MiB and holds it; the sampled peak must
 rise by about that much, its stack must end in that function, and only the group naming it gets the peak.
@@ -14,8 +14,8 @@ import weakref
 import numpy as np
 import pytest
 
-from benchmark import memory_sampler
-from benchmark.memory_sampler import PeakSampler
+from benchmark.runner.diagnostics import memory_sampler
+from benchmark.runner.diagnostics.memory_sampler import PeakSampler
 
 pytestmark = pytest.mark.skipif(not memory_sampler.available(), reason="needs /proc/self/statm (Linux)")
 

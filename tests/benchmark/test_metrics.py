@@ -4,7 +4,7 @@ import skimage.data
 import skimage.metrics
 import torch
 
-from benchmark.metrics import psnr, ssim
+from benchmark.results.metrics import psnr, ssim
 
 
 @pytest.fixture(scope="module")

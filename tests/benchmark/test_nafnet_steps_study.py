@@ -13,13 +13,13 @@ from scipy.optimize import brentq
 
 import lenses
 from attacks.nafnet_known_pairs import NafnetKnownPairs
-from benchmark.metrics import psnr
-from benchmark.profiles import get_profile
-from benchmark.run_config import RunConfig
+from benchmark.results.metrics import psnr
+from benchmark.store.profiles import get_profile
+from benchmark.runner.config import RunConfig
 from benchmark.scenes import load_scenes
-from benchmark.sensing import sense, to_tensor
+from benchmark.runner.sensing import sense, to_tensor
 from benchmark.studies import nafnet_steps
-from benchmark.tasks import fit_context
+from benchmark.runner.tasks import fit_context
 
 
 def _records(steps, values):

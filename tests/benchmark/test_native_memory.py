@@ -13,12 +13,12 @@ import textwrap
 
 import pytest
 
-from benchmark import native_memory
+from benchmark.runner.diagnostics import native_memory
 
 SHAPES = 300  # distinct input shapes, more than the bounded capacity (128 primitives)
 GROWTH = textwrap.dedent(f"""
     import benchmark, os, torch  # importing benchmark bounds the cache
-    from benchmark.native_memory import live_heap_bytes as live
+    from benchmark.runner.diagnostics.native_memory import live_heap_bytes as live
     torch.set_num_threads(1)
     net = torch.nn.Sequential(*[torch.nn.Conv2d(64, 64, 3, padding=1) for _ in range(2)]).eval()
     with torch.no_grad():
@@ -63,8 +63,8 @@ def test_importing_benchmark_bounds_the_cache_and_keeps_a_user_setting():
 
 HELD = textwrap.dedent("""
     import gc, torch
-    from benchmark.memory_sampler import current_rss_mib
-    from benchmark.native_memory import release_free_memory
+    from benchmark.runner.diagnostics.memory_sampler import current_rss_mib
+    from benchmark.runner.diagnostics.native_memory import release_free_memory
     big = torch.ones(16 * 2**20 // 4)  # freeing one 16 MB mapping raises glibc's mmap threshold to 16 MB
     del big
     start = current_rss_mib()

@@ -10,8 +10,8 @@ import torch
 from scipy.stats import norm
 
 import lenses
-from benchmark.observer.ceiling import (Camera, CeilingCurve, PlateModel, Precision, ceiling_curves, certified_width,
-                                        hypothesis_means, ideal_accuracy, position_accuracies)
+from benchmark.results.observer.ceiling import (Camera, CeilingCurve, PlateModel, Precision, ceiling_curves, certified_width, hypothesis_means,
+                                                ideal_accuracy, position_accuracies)
 
 MODEL = PlateModel()
 

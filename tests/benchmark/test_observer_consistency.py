@@ -8,8 +8,8 @@ from scipy.stats import binomtest
 
 import lenses
 from attacks.plates.plate_render import random_plate_text
-from benchmark.observer.ceiling import Precision, ceiling_curve
-from benchmark.observer.consistency import BinAccuracy, ceiling_high_in_bin, check_consistency
+from benchmark.results.observer.ceiling import Precision, ceiling_curve
+from benchmark.results.observer.consistency import BinAccuracy, ceiling_high_in_bin, check_consistency
 
 
 @pytest.fixture(scope="module")

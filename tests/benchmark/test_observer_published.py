@@ -9,15 +9,15 @@ from pathlib import Path
 
 import pytest
 
-from benchmark import leaderboard_report
-from benchmark.leaderboard import publish
-from benchmark.leaderboard_entries import LEADERBOARD, load_entries
-from benchmark.leaderboard_tables import main_table
-from benchmark.observer import published
-from benchmark.observer.ceiling import Precision, ceiling_curve
-from benchmark.observer.study import summary
-from benchmark.profiles import get_profile
-from benchmark.schema import Row
+from benchmark.publish import report as leaderboard_report
+from benchmark.publish.leaderboard import publish
+from benchmark.results.entries import LEADERBOARD, load_entries
+from benchmark.publish.tables import main_table
+from benchmark.results.observer import published
+from benchmark.results.observer.ceiling import Precision, ceiling_curve
+from benchmark.studies.observer_study import summary
+from benchmark.store.profiles import get_profile
+from benchmark.results.schema import Row
 from lenses import Lens, parse_spec
 
 STUDY = json.loads((LEADERBOARD / "studies" / "ideal_observer.json").read_text())
@@ -181,7 +181,7 @@ def test_the_smoke_entries_carry_the_study_columns():
 def test_the_reader_study_checks_every_bin_against_the_ceiling(caplog, near_focus):
     """A reader of the reader study that reads every 32-48 px plate of a lens whose ceiling there is
     below 90 % trips the check (logged as an error, kept in the record); one that reads none passes."""
-    from benchmark.observer.reader_study import summarise
+    from benchmark.studies.reader_study import summarise
     spec, study = near_focus
     records = [{"lens": "near-focus", "attack": reader, "width_px": 33 + i % 10, "correct": reader == "answer-key",
                 "truth": "AB123CD", "read": "AB123CD" if reader == "answer-key" else ""}
@@ -196,7 +196,7 @@ def test_the_reader_study_checks_every_bin_against_the_ceiling(caplog, near_focu
 
 
 def test_the_chart_draws_the_reader_study_per_width_bin(tmp_path):
-    from benchmark.charts.ideal_observer import ideal_observer_figure, write_ideal_observer_chart
+    from benchmark.results.charts.ideal_observer import ideal_observer_figure, write_ideal_observer_chart
     bins = [{"low_px": 32, "high_px": 48, "accuracy": 0.25, "interval": [0.1, 0.5], "n_plates": 12},
             {"low_px": 192, "high_px": None, "accuracy": 0.75, "interval": [0.4, 0.9], "n_plates": 4}]
     readers = {"lens_specs": {"defocus": DEFOCUS_SPEC}, "lenses": {"defocus": {"ideal-observer": {"bins": bins}}}}

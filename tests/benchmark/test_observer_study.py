@@ -7,8 +7,8 @@ import shutil
 
 import pytest
 
-from benchmark.observer import study
-from benchmark.observer.ceiling import Precision, ceiling_curves
+from benchmark.studies import observer_study as study
+from benchmark.results.observer.ceiling import Precision, ceiling_curves
 
 TINY = Precision(min_plates=2, batch=2, max_plates=2)
 
@@ -74,7 +74,7 @@ def test_a_part_computed_apart_merges_by_lens(stored, tmp_path):
 
 
 def test_reader_studies_read_apart_combine_and_are_checked_again(tmp_path):
-    from benchmark.observer import reader_study
+    from benchmark.studies import reader_study
     specs = study.quick_lens_specs()
     paths = []
     for lens, correct in (("defocus", False), ("ideal", True)):
@@ -110,7 +110,8 @@ def test_reader_studies_read_apart_combine_and_are_checked_again(tmp_path):
 def test_the_published_study_covers_every_quick_lens_and_no_reader_beats_it():
     """Every lens of the quick leaderboard has a ceiling computed for its very spec, W_5% separates
     ideal, defocus and os-d-1000, and the stored reader study re-checks clean against it."""
-    from benchmark.observer import published, reader_study
+    from benchmark.results.observer import published
+    from benchmark.studies import reader_study
     record = published.load_study()
     for name, spec in study.quick_lens_specs().items():
         assert published.study_record(record, name, spec) is not None, name

@@ -1,4 +1,4 @@
-"""Plate charts (benchmark/charts/plate_width.py, plate_gallery.py): accuracy-by-width curves and the crop gallery."""
+"""Plate charts (benchmark/results/charts/plate_width.py, plate_gallery.py): accuracy-by-width curves and the crop gallery."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from attacks import PlateRead
-from benchmark.charts import plate_gallery, plate_width
-from benchmark.plate_scoring import readable
+from benchmark.results.charts import plate_gallery, plate_width
+from benchmark.results.plate_scoring import readable
 from benchmark.scenes import load_scenes
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

@@ -11,12 +11,12 @@ import attacks
 import attacks.lpdr
 from attacks.gray_world import gray_world_balance
 from attacks.plates.memo import forgetting
-from benchmark.evaluation import Attacked, Target, run_reader
-from benchmark.profiles import get_profile
-from benchmark.rows import RowBuilder
-from benchmark.run_config import RunConfig
+from benchmark.runner.evaluation import Attacked, Target, run_reader
+from benchmark.store.profiles import get_profile
+from benchmark.runner.rows import RowBuilder
+from benchmark.runner.config import RunConfig
 from benchmark.scenes import load_scenes
-from benchmark.sensing import to_tensor
+from benchmark.runner.sensing import to_tensor
 
 TIMING = ("images_per_s",)
 

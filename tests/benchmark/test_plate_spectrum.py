@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-import benchmark.plate_spectrum as ps
-from benchmark.plate_spectrum import PLATE_ASPECT, estimate_plate_spectrum, spectrum_from_crops
+import benchmark.scenes.plate_spectrum as ps
+from benchmark.scenes.plate_spectrum import PLATE_ASPECT, estimate_plate_spectrum, spectrum_from_crops
 
 
 def cosine_plate(width: int, cycles: int, aspect: float = PLATE_ASPECT) -> np.ndarray:

@@ -9,14 +9,14 @@ import scipy.stats
 import torch
 
 import lenses
-from benchmark.evaluation import shape_batches
-from benchmark.plate_scoring import readable
-from benchmark.profiles import get_profile
-from benchmark.run_config import RunConfig
+from benchmark.runner.evaluation import shape_batches
+from benchmark.results.plate_scoring import readable
+from benchmark.store.profiles import get_profile
+from benchmark.runner.config import RunConfig
 from benchmark.scenes import load_scene
 from benchmark.scenes.windows import PlateWindow, plate_windows, window_box, window_scene
-from benchmark.sensing import noise_key, positional_normal, sense_windows, simulation_box
-from benchmark.tasks import plate_set
+from benchmark.runner.sensing import noise_key, positional_normal, sense_windows, simulation_box
+from benchmark.runner.tasks import plate_set
 
 FRAME_HW = (128, 256)
 # Interior (odd corner), on the top-left corner, on the bottom-right corner, and the whole frame.

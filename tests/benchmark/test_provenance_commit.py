@@ -6,7 +6,7 @@ import subprocess
 
 import torch
 
-from benchmark import provenance
+from benchmark.store import provenance
 
 
 def test_commit_is_read_once_per_process(monkeypatch):

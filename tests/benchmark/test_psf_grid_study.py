@@ -5,7 +5,7 @@ import json
 import pytest
 import torch
 
-from benchmark import leaderboard_report
+from benchmark.publish import report as leaderboard_report
 from benchmark.scenes.loading import load_scene
 from benchmark.studies import psf_grid
 from lenses.optics import choose_geometry

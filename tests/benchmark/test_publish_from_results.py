@@ -8,9 +8,9 @@ import json
 import pytest
 
 import benchmark
-from benchmark import leaderboard
-from benchmark.profiles import get_profile
-from benchmark.schema import Results, write_results
+from benchmark.publish import leaderboard
+from benchmark.store.profiles import get_profile
+from benchmark.results.schema import Results, write_results
 
 
 def test_publishing_a_finished_run_gives_the_entry_run_publish_gives(tmp_path):

@@ -1,7 +1,7 @@
 """A published run's pictures reach the leaderboard under stable names, in their own README sections."""
 
-from benchmark import leaderboard_report
-from benchmark.leaderboard import copy_run_pictures
+from benchmark.publish import report as leaderboard_report
+from benchmark.publish.leaderboard import copy_run_pictures
 
 
 def test_first_sample_and_the_width_chart_are_copied_and_listed(tmp_path):

@@ -7,7 +7,7 @@ import textwrap
 
 import pytest
 
-from benchmark.schema import read_results
+from benchmark.results.schema import read_results
 
 pytest.importorskip("ray", reason='the Ray executor is an optional extra: pip install ".[ray]"')
 

@@ -12,7 +12,7 @@ import threading
 
 import pytest
 
-from benchmark.schema import read_results
+from benchmark.results.schema import read_results
 
 # Timing, and provenance that names when and at which commit rather than what was measured.
 TIMING = {"fit_s", "images_per_s", "wall_s", "date", "git_commit"}
@@ -299,11 +299,11 @@ def test_two_runs_on_one_cache_both_complete_and_agree(shared_cache_runs):
 
 
 def test_results_with_failures_are_not_reused_by_a_later_run(tmp_path, monkeypatch):
-    from benchmark import tasks
-    from benchmark.planning import Task
-    from benchmark.profiles import get_profile
-    from benchmark.run_config import RunConfig
-    from benchmark.schema import Row, RowError
+    from benchmark.runner import tasks
+    from benchmark.runner.planning import Task
+    from benchmark.store.profiles import get_profile
+    from benchmark.runner.config import RunConfig
+    from benchmark.results.schema import Row, RowError
 
     calls = []
 
@@ -315,7 +315,7 @@ def test_results_with_failures_are_not_reused_by_a_later_run(tmp_path, monkeypat
 
     monkeypatch.setitem(tasks._KINDS, "test-kind", body)
     task = Task("test-kind", 0)
-    # execute records each computed task's cost under the run's profile (benchmark.task_costs)
+    # execute records each computed task's cost under the run's profile (benchmark.runner.task_costs)
     cfg = RunConfig(lenses=[], attacks=None, scenes="s", profile=get_profile("smoke"), seeds=[0], cache_dir=tmp_path)
     assert tasks.execute(task, cfg, tmp_path).has_failures
     assert not tasks.execute(task, cfg, tmp_path).has_failures  # computed again: now it works

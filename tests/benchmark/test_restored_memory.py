@@ -11,12 +11,12 @@ import weakref
 import torch
 
 import attacks
-from benchmark.evaluation import Attacked, PlateSet, Target, gallery_windows, run_restorers
-from benchmark.profiles import get_profile
-from benchmark.rows import RowBuilder
-from benchmark.run_config import RunConfig
+from benchmark.runner.evaluation import Attacked, PlateSet, Target, gallery_windows, run_restorers
+from benchmark.store.profiles import get_profile
+from benchmark.runner.rows import RowBuilder
+from benchmark.runner.config import RunConfig
 from benchmark.scenes import load_scenes
-from benchmark.sensing import to_tensor
+from benchmark.runner.sensing import to_tensor
 
 
 def test_the_kept_scene_does_not_hold_the_restored_batch():
@@ -43,8 +43,8 @@ def test_the_kept_scene_does_not_hold_the_restored_batch():
 
 
 def test_restoration_metrics_score_in_chunks_with_the_one_batch_values(monkeypatch):
-    import benchmark.evaluation as evaluation
-    from benchmark.metrics import psnr, ssim
+    import benchmark.runner.evaluation as evaluation
+    from benchmark.results.metrics import psnr, ssim
 
     g = torch.Generator().manual_seed(0)
     sharp = torch.rand(19, 3, 24, 40, generator=g)
@@ -75,7 +75,7 @@ class _Recording(attacks.Restorer):
 def test_whole_frames_are_restored_a_pixel_budget_at_a_time_in_order():
     """Quick frames (512 x 1024) go two per call whatever the profile's batch; small frames keep it;
     the restorations come back complete and in order."""
-    from benchmark.evaluation import RESTORE_PIXELS_PER_BATCH, frames_per_batch, restore_all
+    from benchmark.runner.evaluation import RESTORE_PIXELS_PER_BATCH, frames_per_batch, restore_all
     big = torch.rand(5, 3, 512, 1024, generator=torch.Generator().manual_seed(0))
     assert frames_per_batch(big, 8) == RESTORE_PIXELS_PER_BATCH // (512 * 1024) == 2
     assert frames_per_batch(torch.rand(5, 3, 128, 256), 4) == 4
@@ -89,7 +89,7 @@ def test_whole_frames_are_restored_a_pixel_budget_at_a_time_in_order():
 def test_plate_windows_are_restored_a_pixel_budget_at_a_time_in_order():
     """Windows of one shape go at most the profile's batch and RESTORE_PIXELS_PER_BATCH pixels per call;
     the restorations come back complete and in order."""
-    from benchmark.evaluation import RESTORE_PIXELS_PER_BATCH, restore_windows
+    from benchmark.runner.evaluation import RESTORE_PIXELS_PER_BATCH, restore_windows
     g = torch.Generator().manual_seed(0)
     windows = [torch.rand(3, 512, 512, generator=g) for _ in range(5)] + [torch.rand(3, 64, 64, generator=g)
                                                                           for _ in range(3)]

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 import torch
 
-from benchmark.leaderboard_entries import load_entries, make_entry, write_entry
-from benchmark.plate_scoring import PlateOutcome, levenshtein
-from benchmark.rows import plate_units, scene_units, utility_units
+from benchmark.results.entries import load_entries, make_entry, write_entry
+from benchmark.results.plate_scoring import PlateOutcome, levenshtein
+from benchmark.runner.rows import plate_units, scene_units, utility_units
 from benchmark.scenes import load_scenes
-from benchmark.schema import Results, Row, Units, dumps_compact, read_results, write_results
-from benchmark.utility.scoring import confusion_matrix, scores
+from benchmark.results.schema import Results, Row, Units, dumps_compact, read_results, write_results
+from benchmark.codesign.utility.scoring import confusion_matrix, scores
 
 IDS = {"seed": 0, "profile": "smoke", "scenes": "synthetic"}
 

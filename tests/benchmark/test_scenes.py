@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from benchmark.scenes import (CLASS_NAMES, PLATE_FORMAT, SCENE_SETS, TRAIN_ID, SceneDataset, load_scene, load_scenes,
-                              matches_format, plate_entropy_bits, scene_seed)
+from benchmark.scenes import (CLASS_NAMES, PLATE_FORMAT, SCENE_SETS, TRAIN_ID, SceneDataset, load_scene, load_scenes, matches_format,
+                              plate_entropy_bits, scene_seed)
 from benchmark.scenes.dataset import crop_scene, flip_scene
 from benchmark.scenes.photos import PHOTO_SPLITS
 

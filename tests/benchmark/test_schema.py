@@ -5,16 +5,7 @@ import math
 
 import pytest
 
-from benchmark.schema import (
-    Results,
-    Row,
-    RowError,
-    migrate_legacy_row,
-    read_results,
-    rows_of_kind,
-    settings_hash,
-    write_results,
-)
+from benchmark.results.schema import Results, Row, RowError, migrate_legacy_row, read_results, rows_of_kind, settings_hash, write_results
 
 IDS = {"lens": "defocus", "seed": 0, "profile": "smoke", "scenes": "synthetic"}
 PROV = {"git_commit": "abc", "packages": "torch=2", "python": "3.12", "device": "cpu:x86_64", "threads": 2,

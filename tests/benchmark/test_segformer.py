@@ -10,13 +10,7 @@ import pytest
 import torch
 from safetensors.torch import save_file
 
-from benchmark.utility.segformer import (
-    _window_starts,
-    build_segformer,
-    load_segformer_weights,
-    segment_logits,
-    sliding_window_logits,
-)
+from benchmark.codesign.utility.segformer import _window_starts, build_segformer, load_segformer_weights, segment_logits, sliding_window_logits
 
 
 @pytest.fixture(autouse=True)

@@ -1,4 +1,4 @@
-"""The folded SegFormer head (benchmark/utility/segformer_onnx.py) computes the head as trained: the same
+"""The folded SegFormer head (benchmark/codesign/utility/segformer_onnx.py) computes the head as trained: the same
 logits as ``segment_logits`` to float rounding, with trained-like batch-norm statistics, at any size."""
 
 from __future__ import annotations
@@ -6,8 +6,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from benchmark.utility.segformer import build_segformer, segment_logits
-from benchmark.utility.segformer_onnx import FoldedSegformerLogits
+from benchmark.codesign.utility.segformer import build_segformer, segment_logits
+from benchmark.codesign.utility.segformer_onnx import FoldedSegformerLogits
 
 
 def _net(variant: str) -> torch.nn.Module:

@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 import torch
 
-import benchmark.utility.segformer_onnx as segformer_onnx
-from benchmark.cache import ArtifactCache
+import benchmark.codesign.utility.segformer_onnx as segformer_onnx
+from benchmark.store.cache import ArtifactCache
 from benchmark.scenes import load_scenes
-from benchmark.sensing import to_tensor
-from benchmark.utility.clean import load_verified, shipped_for
-from benchmark.profiles import PROFILES
-from benchmark.utility.scoring import confusion_matrix, predict, scores
-from benchmark.utility.segformer import build_segformer, segment_logits
-from benchmark.utility.segformer_onnx import segformer_engine, weights_sha256
+from benchmark.runner.sensing import to_tensor
+from benchmark.codesign.utility.clean import load_verified, shipped_for
+from benchmark.store.profiles import PROFILES
+from benchmark.codesign.utility.scoring import confusion_matrix, predict, scores
+from benchmark.codesign.utility.segformer import build_segformer, segment_logits
+from benchmark.codesign.utility.segformer_onnx import segformer_engine, weights_sha256
 
 
 @pytest.fixture(autouse=True)

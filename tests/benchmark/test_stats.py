@@ -1,4 +1,4 @@
-"""benchmark.stats against scipy, textbook values, a coverage simulation and shrunk samples."""
+"""benchmark.results.stats against scipy, textbook values, a coverage simulation and shrunk samples."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from benchmark import stats
+from benchmark.results import stats
 
 Z95 = 1.959963984540054
 

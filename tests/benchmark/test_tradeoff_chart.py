@@ -8,8 +8,8 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.text import Text
 
-from benchmark.charts.labels import spread
-from benchmark.charts.tradeoff import TradeoffPoint, tradeoff_figure
+from benchmark.results.charts.labels import spread
+from benchmark.results.charts.tradeoff import TradeoffPoint, tradeoff_figure
 
 
 def point(lens: str, profile: str, privacy: float, utility: float, err: float = 0.5) -> TradeoffPoint:

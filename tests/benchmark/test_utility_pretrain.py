@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 import torch
 
-from benchmark.profiles import get_profile
+from benchmark.store.profiles import get_profile
 from benchmark.scenes import load_scenes
-from benchmark.utility.clean import (WEIGHTS_DIR, CorruptWeightsError, clean_utility_id, clean_utility_net,
-                                     file_sha256, load_verified, provenance_path_for, shipped_for)
-from benchmark.utility.pretrain import FINAL_LR_FRACTION, evaluate, learning_rate, load_val, main, plateau
-from benchmark.utility.pretrain_data import RareClassCropSampler
-from benchmark.utility.scoring import N_CLASSES
+from benchmark.codesign.utility.clean import (WEIGHTS_DIR, CorruptWeightsError, clean_utility_id, clean_utility_net, file_sha256, load_verified,
+                                              provenance_path_for, shipped_for)
+from benchmark.codesign.utility.pretrain import FINAL_LR_FRACTION, evaluate, learning_rate, load_val, main, plateau
+from benchmark.codesign.utility.pretrain_data import RareClassCropSampler
+from benchmark.codesign.utility.scoring import N_CLASSES
 
 # mIoU over 2 scenes (about 1 M pixels) moves by far less than this when only BLAS summation order
 # differs (threads, CPU); a changed net, scene generator or scoring moves it by more.

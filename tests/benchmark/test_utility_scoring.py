@@ -7,7 +7,7 @@ import pytest
 import torch
 from PIL import Image
 
-from benchmark.utility.scoring import confusion_matrix, scores
+from benchmark.codesign.utility.scoring import confusion_matrix, scores
 
 
 def test_matches_cityscapes_scripts(tmp_path):

@@ -5,11 +5,11 @@ import json
 
 import pytest
 
-from benchmark import leaderboard_report
-from benchmark.charts.profiles import utility_params
-from benchmark.profiles import get_profile
+from benchmark.publish import report as leaderboard_report
+from benchmark.publish.profile_chart import utility_params
+from benchmark.store.profiles import get_profile
 from benchmark.studies import utility_size
-from benchmark.utility import pretrain
+from benchmark.codesign.utility import pretrain
 
 
 def test_variants_are_trained_to_the_recipe_measured_compared_and_charted(tmp_path):

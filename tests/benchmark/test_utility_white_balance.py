@@ -5,10 +5,10 @@ import dataclasses
 import torch
 
 import lenses
-from benchmark.profiles import get_profile
-from benchmark.run_config import RunConfig
-from benchmark.utility.measure import segmenter
-from benchmark.utility.segformer import build_segformer
+from benchmark.store.profiles import get_profile
+from benchmark.runner.config import RunConfig
+from benchmark.runner.utility_measure import segmenter
+from benchmark.codesign.utility.segformer import build_segformer
 
 
 def test_a_lens_segmenter_white_balances_its_input_first(tmp_path):

@@ -5,7 +5,7 @@ before, fastest of ROUNDS interleaved rounds) is asserted then; without --benchm
 both read the same. Both segment with the shipped quick clean SegFormer-B0 through ONNX Runtime by 256 x 256
 sliding windows and read with EasyOCR on THREADS threads, as a run does. Before: the decode head as trained in
 the ONNX graph, the recognizer's per-crop tail on the caller's threads. Now: the head folded
-(benchmark/utility/segformer_onnx.py ``FoldedSegformerLogits``), the tail on one thread (attacks/plates/ocr.py
+(benchmark/codesign/utility/segformer_onnx.py ``FoldedSegformerLogits``), the tail on one thread (attacks/plates/ocr.py
 ``one_thread``). `extra_info` holds both ways' seconds per window by stage, the ratio, the threads and the load,
 and the seconds a chain of the quick run's 201 windows would take at this speed (the issue's target: <= 15 s on
 2 idle cores; not asserted, as the machine is shared).
@@ -22,18 +22,18 @@ import numpy as np
 import torch
 
 import attacks
-import benchmark.utility.segformer_onnx as segformer_onnx
+import benchmark.codesign.utility.segformer_onnx as segformer_onnx
 from attacks.plates import ocr as plate_ocr
 from attacks.plates.memo import forgetting
-from benchmark.evaluation import read_plates
-from benchmark.plate_scoring import readable
-from benchmark.profiles import get_profile
-from benchmark.run_config import RunConfig
+from benchmark.runner.evaluation import read_plates
+from benchmark.results.plate_scoring import readable
+from benchmark.store.profiles import get_profile
+from benchmark.runner.config import RunConfig
 from benchmark.scenes import load_scene
 from benchmark.scenes.windows import plate_windows, window_scene
-from benchmark.utility.clean import clean_utility_net
-from benchmark.utility.measure import segmenter
-from benchmark.utility.scoring import window_for
+from benchmark.codesign.utility.clean import clean_utility_net
+from benchmark.runner.utility_measure import segmenter
+from benchmark.codesign.utility.scoring import window_for
 
 TARGET_RATIO = 0.75
 ROUNDS = 2

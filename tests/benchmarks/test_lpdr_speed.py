@@ -15,15 +15,15 @@ import torch
 import attacks
 from attacks.gray_world import gray_world_balance
 from attacks.plates.memo import forgetting, fresh
-from benchmark.evaluation import read_plates
-from benchmark.plate_scoring import readable
-from benchmark.profiles import get_profile
-from benchmark.run_config import RunConfig
+from benchmark.runner.evaluation import read_plates
+from benchmark.results.plate_scoring import readable
+from benchmark.store.profiles import get_profile
+from benchmark.runner.config import RunConfig
 from benchmark.scenes import load_scene, load_scenes
 from benchmark.scenes.windows import plate_windows, window_scene
-from benchmark.utility.clean import clean_utility_net
-from benchmark.utility.measure import segmenter
-from benchmark.utility.scoring import window_for
+from benchmark.codesign.utility.clean import clean_utility_net
+from benchmark.runner.utility_measure import segmenter
+from benchmark.codesign.utility.scoring import window_for
 
 
 @pytest.mark.parametrize("detector", ["craft", "opencv"])
@@ -44,7 +44,7 @@ def test_lpdr_oracle_per_512x1024_image(benchmark, detector):
     benchmark.pedantic(read, rounds=2, iterations=1)
     for stage, seconds in reader.stage_seconds.items():
         benchmark.extra_info[f"{stage}_s_per_image"] = seconds / reader.images_read
-    benchmark.extra_info["s_per_image"] = benchmark.stats.stats.mean / len(scenes)
+    benchmark.extra_info["s_per_image"] = benchmark.results.stats.stats.mean / len(scenes)
 
 
 MEMO_TARGET_RATIO = 0.8

@@ -19,15 +19,15 @@ import torch
 import attacks
 from attacks.lpdr import Lpdr
 from attacks.plates.memo import forgetting
-from benchmark.evaluation import read_plates
-from benchmark.plate_scoring import readable
-from benchmark.profiles import get_profile
-from benchmark.run_config import RunConfig
+from benchmark.runner.evaluation import read_plates
+from benchmark.results.plate_scoring import readable
+from benchmark.store.profiles import get_profile
+from benchmark.runner.config import RunConfig
 from benchmark.scenes import load_scene
 from benchmark.scenes.windows import plate_windows, window_scene
-from benchmark.utility.clean import clean_utility_net
-from benchmark.utility.measure import segmenter
-from benchmark.utility.scoring import window_for
+from benchmark.codesign.utility.clean import clean_utility_net
+from benchmark.runner.utility_measure import segmenter
+from benchmark.codesign.utility.scoring import window_for
 
 TARGET_RATIO = 0.4
 ROUNDS = 2

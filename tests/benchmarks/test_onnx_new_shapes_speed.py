@@ -16,7 +16,7 @@ import torch
 
 from attacks.onnx_backend import OnnxModel, export_onnx
 from attacks.restorer_training import RestorerBudget
-from benchmark.profiles import PROFILES
+from benchmark.store.profiles import PROFILES
 
 # Measured on the shared 2-core machine (load 4-6): 2.5-3.4x per new size at 8 x 256 x 320 and up.
 TARGET_SPEEDUP = 1.5

@@ -19,11 +19,11 @@ import torch
 
 import attacks
 from attacks.plates.memo import forgetting
-from benchmark.evaluation import shape_batches
-from benchmark.plate_scoring import readable
+from benchmark.runner.evaluation import shape_batches
+from benchmark.results.plate_scoring import readable
 from benchmark.scenes import load_scene
 from benchmark.scenes.windows import plate_windows, window_scene
-from benchmark.utility.scoring import window_for
+from benchmark.codesign.utility.scoring import window_for
 
 TARGET_RATIO = 0.85
 ROUNDS = 3

@@ -21,9 +21,9 @@ from attacks.networks import RED10
 from attacks.networks.nafnet_folded import fold_for_inference
 from attacks.onnx_backend import InferenceEngine
 from attacks.restorer_training import RestorerBudget
-from benchmark.charts.restorers import restorer_points, write_restorer_speed_chart
-from benchmark.schema import migrate_legacy_row
-from benchmark.profiles import PROFILES
+from benchmark.results.charts.restorers import restorer_points, write_restorer_speed_chart
+from benchmark.results.schema import migrate_legacy_row
+from benchmark.store.profiles import PROFILES
 
 from alternating import best_seconds
 

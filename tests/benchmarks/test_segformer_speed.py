@@ -5,7 +5,7 @@ net segments 8 images (the profile's batch) by sliding 256 x 256 windows (the qu
 192) with 2 threads, through `predict` with the torch path (the code before ONNX Runtime) and with
 the ONNX Runtime engine, alternating rounds so both see the same load on the shared machine.
 Target (issue 17): ONNX Runtime faster than torch, with the same predictions; the ratio is stored in
-`extra_info` and is why `benchmark.utility.segformer_onnx` uses ONNX Runtime on the CPU.
+`extra_info` and is why `benchmark.codesign.utility.segformer_onnx` uses ONNX Runtime on the CPU.
 """
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ from __future__ import annotations
 import torch
 
 from attacks.onnx_backend import OnnxModel, export_onnx
-from benchmark.profiles import PROFILES
-from benchmark.utility.clean import load_verified, shipped_for
-from benchmark.utility.scoring import predict, window_for
-from benchmark.utility.segformer_onnx import FoldedSegformerLogits, segformer_engine
+from benchmark.store.profiles import PROFILES
+from benchmark.codesign.utility.clean import load_verified, shipped_for
+from benchmark.codesign.utility.scoring import predict, window_for
+from benchmark.codesign.utility.segformer_onnx import FoldedSegformerLogits, segformer_engine
 
 from alternating import alternate
 

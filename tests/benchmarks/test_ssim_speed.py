@@ -1,4 +1,4 @@
-"""SSIM of quick-sized scenes: OpenCV's separable float64 filter (benchmark.metrics.ssim) against
+"""SSIM of quick-sized scenes: OpenCV's separable float64 filter (benchmark.results.metrics.ssim) against
 the former torch grouped float64 conv2d, written out below as the reference.
 
 Run with `pytest tests/benchmarks/test_ssim_speed.py --benchmark-only`. Both alternate in the same
@@ -15,7 +15,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from benchmark.metrics import ssim
+from benchmark.results.metrics import ssim
 
 SIGMA, RADIUS = 1.5, 5
 

@@ -1,7 +1,7 @@
 """Training steps now against the code before issue 17's training changes, as ratios in one run.
 
 Run with `pytest tests/benchmarks/test_training_step_speed.py --benchmark-only`. Before: ``transformers``'
-decode head and ``F.interpolate`` for the logits (the code before benchmark/utility/bilinear.py), and the
+decode head and ``F.interpolate`` for the logits (the code before benchmark/codesign/utility/bilinear.py), and the
 co-design's RED10 adversary in the default memory layout; now: ``TrainingDecodeHead``,
 ``resize_for_training`` and ``benchmark.codesign.adversary.for_training`` (channels-last,
 ``TRAINING_LAYOUT``). Both alternate
@@ -30,9 +30,9 @@ import torch.nn.functional as F
 from transformers.models.segformer.modeling_segformer import SegformerDecodeHead
 
 import attacks.restorer_training as restorer_training
-import benchmark.utility.segformer as segformer
+import benchmark.codesign.utility.segformer as segformer
 from benchmark.codesign import adversary
-from benchmark.profiles import PROFILES
+from benchmark.store.profiles import PROFILES
 from benchmark.studies.codesign_speed import time_codesign_steps
 
 from alternating import alternate

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from benchmark import leaderboard_report
-from benchmark.leaderboard import publish
-from benchmark.profiles import get_profile
-from benchmark.schema import Row
+from benchmark.publish import report as leaderboard_report
+from benchmark.publish.leaderboard import publish
+from benchmark.store.profiles import get_profile
+from benchmark.results.schema import Row
 
 CHROMIUM, CHROMEDRIVER = shutil.which("chromium"), shutil.which("chromedriver")
 webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed (pip install -e '.[test]')")

@@ -1,9 +1,9 @@
 """The trade-off table names a worst-case attacker that ran on fewer seeds than its entry
 (NAFNet attackers fitted at seed 0 only) with the seeds it ran on."""
 
-from benchmark.leaderboard_entries import make_entry
-from benchmark.leaderboard_tables import main_table
-from benchmark.schema import Row
+from benchmark.results.entries import make_entry
+from benchmark.publish.tables import main_table
+from benchmark.results.schema import Row
 
 PROFILE = {"name": "quick", "n_val": 64, "image_size": (512, 1024)}
 

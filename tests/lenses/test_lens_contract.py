@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import lenses
-from benchmark.profiles import get_profile
+from benchmark.store.profiles import get_profile
 
 SPECS = sorted((Path(lenses.__file__).parent / "specs").glob("*.toml"))
 REGISTERED = sorted(lenses.available())

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from benchmark import leaderboard_entries as leaderboard
-from benchmark import leaderboard_report
-from benchmark.leaderboard_entries import Entry
-from benchmark.schema import Row, read_results
+from benchmark.results import entries as leaderboard
+from benchmark.publish import report as leaderboard_report
+from benchmark.results.entries import Entry
+from benchmark.results.schema import Row, read_results
 
 ENTRIES = leaderboard.LEADERBOARD / "entries"
 # Timing and throughput depend on the machine and its load, not on the code's numbers.

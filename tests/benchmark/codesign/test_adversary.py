@@ -11,7 +11,7 @@ from benchmark.codesign.adversary import MARGIN_DB, Probe, build_adversary, pret
 from benchmark.codesign.builtin import START_SPEC
 from benchmark.codesign.coefficients import initial_coefficients
 from benchmark.codesign.data import CropSampler
-from benchmark.profiles import PROFILES
+from benchmark.store.profiles import PROFILES
 from lenses.lens import Lens
 from lenses.spec import load_spec
 

@@ -12,7 +12,7 @@ from benchmark.codesign.coefficients import INITIAL_AMPLITUDE_UM, bound_limited
 from benchmark.codesign.data import CropSampler
 from benchmark.codesign.schemes import SCHEMES
 from benchmark.codesign.trainer import CoDesign, TrainingDivergedError
-from benchmark.profiles import PROFILES
+from benchmark.store.profiles import PROFILES
 from lenses.spec import load_spec
 
 TINY = dataclasses.replace(PROFILES["smoke"], image_size=(64, 128), n_train=2, train_crop=(48, 48), batch_size=2,
@@ -41,7 +41,7 @@ def test_one_step_of_each_scheme_moves_the_optics(scheme, tmp_path):
 
 
 def test_os_info_step_lowers_the_bound(tmp_path):
-    from benchmark.plate_spectrum import cached_plate_spectrum
+    from benchmark.scenes.plate_spectrum import cached_plate_spectrum
     from lenses.bound import noise_to_signal, plate_bits
     profile = dataclasses.replace(TINY, codesign_steps=2)
     trained = run("os-info", tmp_path, profile).train(progress=False)

@@ -15,7 +15,7 @@ import torch.multiprocessing as mp
 from benchmark.codesign.builtin import START_SPEC
 from benchmark.codesign.schemes import SCHEMES
 from benchmark.codesign.trainer import CoDesign
-from benchmark.profiles import PROFILES
+from benchmark.store.profiles import PROFILES
 from lenses.spec import load_spec
 
 # test_codesign's tiny profile with two rows per rank: CPU kernels lay out a one-row activation

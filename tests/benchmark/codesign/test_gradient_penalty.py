@@ -14,7 +14,7 @@ from benchmark.codesign.builtin import START_SPEC
 from benchmark.codesign.coefficients import initial_coefficients
 from benchmark.codesign.data import step_generator
 from benchmark.codesign.replicas import SingleProcess
-from benchmark.utility.segformer import build_segformer, segment_logits
+from benchmark.codesign.utility.segformer import build_segformer, segment_logits
 from lenses.lens import Lens
 from lenses.spec import load_spec
 

@@ -14,9 +14,9 @@ from attacks.nafnet_known_pairs import NafnetKnownPairs
 from attacks.shipped_weights import SHIPPED_DIR as ATTACK_WEIGHTS
 from benchmark.codesign.builtin import attach
 from benchmark.codesign.shipped import SHIPPED_DIR, ShippedLensError, install_shipped
-from benchmark.lens_shipping import codesign_run, known_pairs_check, lens_check, run_config
-from benchmark.profiles import PROFILES
-from benchmark.tasks import fit_context
+from benchmark.publish.ship_lens import codesign_run, known_pairs_check, lens_check, run_config
+from benchmark.store.profiles import PROFILES
+from benchmark.runner.tasks import fit_context
 from lenses.spec import load_spec
 
 QUICK = PROFILES["quick"]

@@ -1,0 +1,294 @@
+"""leaderboard/index.html: a self-contained static page of the leaderboard (no server, no network).
+
+Everything is inline (style, vanilla script, the utility-vs-privacy charts as SVG); the only
+external references are the leaderboard's own PNGs, by relative path. The trade-off table has one
+line per entry and threat model: "any attacker" (the markdown table's line) and, for each threat
+model, the worst case among that threat model's attackers only. Selecting a profile, scene set or
+threat model hides the other lines and chart points (one chart per profile and privacy figure);
+clicking a column header sorts by it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import html
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from matplotlib.ticker import MaxNLocator
+
+from benchmark.store.cache import atomic_write_text
+from benchmark.results.charts.tradeoff import TradeoffPoint, tradeoff_points
+from benchmark.results.entries import Entry
+from benchmark.publish.tables import FINDINGS_HEAD, findings_lines, table_columns
+
+ANY_THREAT = "any attacker"
+# Colour per lens, in order of first appearance (colour-blind-safe "Tableau 10").
+_PALETTE = ("#4e79a7", "#f28e2b", "#e15759", "#76b7b2", "#59a14f", "#edc948", "#b07aa1", "#ff9da7", "#9c755f",
+            "#bab0ac")
+_SVG_W, _SVG_H, _PAD_L, _PAD_R, _PAD_T, _PAD_B = 620, 400, 64, 16, 16, 48
+
+_STYLE = """
+body{font-family:system-ui,-apple-system,"Segoe UI",sans-serif;margin:1.5rem auto;max-width:1200px;padding:0 1rem;
+color:#222;line-height:1.4}
+h1{margin-bottom:.2rem}h2{margin-top:2rem;border-bottom:1px solid #ddd}
+table{border-collapse:collapse;font-size:.85rem;margin:.5rem 0}
+th,td{border:1px solid #ddd;padding:.25rem .45rem;text-align:left;vertical-align:top}
+th{background:#f4f4f4}table.sortable th{cursor:pointer;user-select:none}
+table.sortable th[aria-sort=ascending]::after{content:" \\25B2"}
+table.sortable th[aria-sort=descending]::after{content:" \\25BC"}
+tbody tr:nth-child(even){background:#fafafa}
+.filters{display:flex;gap:1rem;flex-wrap:wrap;margin:.5rem 0}.filters label{font-size:.9rem}
+.charts{display:flex;gap:1.5rem;flex-wrap:wrap}figure{margin:0}figcaption{font-size:.85rem;color:#555}
+svg .point{cursor:pointer}svg .axis{stroke:#444}svg .grid{stroke:#e6e6e6}svg text{font-size:11px;fill:#333}
+#tip{position:absolute;display:none;background:#fff;border:1px solid #888;border-radius:4px;padding:.3rem .5rem;
+font-size:.8rem;white-space:pre;pointer-events:none;box-shadow:0 2px 6px rgba(0,0,0,.2)}
+.alarm{color:#b00020}tr.violation{background:#fde7e9}img{max-width:100%}details{margin:.3rem 0}summary{cursor:pointer}.count{color:#555;font-size:.85rem}
+"""
+
+_SCRIPT = """
+(function () {
+  "use strict";
+  function sortKey(td) {
+    var v = td.getAttribute("data-sort");
+    if (v === null || v === "") { return null; }
+    var n = Number(v);
+    return isNaN(n) ? v : n;
+  }
+  document.querySelectorAll("table.sortable").forEach(function (table) {
+    var heads = table.tHead.rows[0].cells;
+    Array.prototype.forEach.call(heads, function (th, col) {
+      th.addEventListener("click", function () {
+        var ascending = th.getAttribute("aria-sort") !== "ascending";
+        Array.prototype.forEach.call(heads, function (h) { h.removeAttribute("aria-sort"); });
+        th.setAttribute("aria-sort", ascending ? "ascending" : "descending");
+        var body = table.tBodies[0];
+        var rows = Array.prototype.slice.call(body.rows);
+        rows.sort(function (a, b) {
+          var x = sortKey(a.cells[col]), y = sortKey(b.cells[col]);
+          if (x === null || y === null) { return (x === null) - (y === null); }  /* empty cells last */
+          var c = (typeof x === "number" && typeof y === "number") ? x - y : String(x).localeCompare(String(y));
+          return ascending ? c : -c;
+        });
+        rows.forEach(function (r) { body.appendChild(r); });
+      });
+    });
+  });
+  var filters = document.querySelectorAll("select[data-filter]");
+  function applyFilters() {
+    var want = {};
+    filters.forEach(function (s) { want[s.getAttribute("data-filter")] = s.value; });
+    var shown = 0;
+    document.querySelectorAll("[data-filtered]").forEach(function (el) {
+      var keep = Object.keys(want).every(function (k) {
+        return want[k] === "*" || !el.hasAttribute("data-" + k) || el.getAttribute("data-" + k) === want[k];
+      });
+      el.style.display = keep ? "" : "none";
+      if (keep && el.tagName === "TR") { shown += 1; }
+    });
+    document.getElementById("shown").textContent = shown + " of " +
+      document.querySelectorAll("#tradeoff tbody tr[data-threat='" + want.threat + "']").length + " lines shown";
+  }
+  filters.forEach(function (s) { s.addEventListener("change", applyFilters); });
+  applyFilters();
+  var tip = document.getElementById("tip");
+  document.querySelectorAll("svg .point").forEach(function (p) {
+    p.addEventListener("mouseenter", function (ev) {
+      tip.textContent = p.getAttribute("data-tip");
+      tip.style.display = "block";
+      tip.style.left = (ev.pageX + 12) + "px";
+      tip.style.top = (ev.pageY + 12) + "px";
+    });
+    p.addEventListener("mouseleave", function () { tip.style.display = "none"; });
+  });
+})();
+"""
+
+
+def _e(text: object) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def threat_views(entry: Entry) -> list[tuple[str, set[str] | None]]:
+    """(threat model, attack chains it allows) for the entry: every attacker, then each threat model's own."""
+    models = sorted({c.threat_model for c in entry.chains() if c.threat_model})
+    return [(ANY_THREAT, None)] + [(m, {c.attack for c in entry.chains() if c.threat_model == m}) for m in models]
+
+
+def _filter_attrs(profile: str, scenes: str, threat: str) -> str:
+    return f'data-filtered="1" data-profile="{_e(profile)}" data-scenes="{_e(scenes)}" data-threat="{_e(threat)}"'
+
+
+def tradeoff_table(entries: Sequence[Entry], study: Mapping[str, Any] | None = None) -> str:
+    """The sortable trade-off table: the columns of the markdown table (`table_columns(study)`) plus
+    the threat model, one line per entry and threat view."""
+    columns = table_columns(study)
+    head = "".join(f"<th>{_e(c.header)}</th>" for c in columns[:4]) + "<th>threat model</th>"
+    head += "".join(f"<th>{_e(c.header)}</th>" for c in columns[4:])
+    lines = []
+    for e in entries:
+        for threat, attacks in threat_views(e):
+            cells = [c.cell(e, attacks) for c in columns]
+            cells = cells[:4] + [(threat, None)] + cells[4:]
+            tds = "".join(f'<td data-sort="{_e(text if value is None else repr(value))}">{_e(text)}</td>'
+                          for text, value in cells)
+            lines.append(f"<tr {_filter_attrs(e.profile, e.scenes, threat)}>{tds}</tr>")
+    return (f'<table id="tradeoff" class="sortable"><thead><tr>{head}</tr></thead><tbody>\n'
+            + "\n".join(lines) + "\n</tbody></table>")
+
+
+def _scale(lo: float, hi: float, a: float, b: float):
+    span = (hi - lo) or 1.0
+    return lambda v: a + (v - lo) / span * (b - a)
+
+
+def _range(values: list[float]) -> tuple[float, float]:
+    lo, hi = min(values), max(values)
+    pad = 0.06 * (hi - lo) if hi > lo else max(abs(hi) * 0.05, 1e-3)
+    return lo - pad, hi + pad
+
+
+def tradeoff_svg(points: Sequence[tuple[TradeoffPoint, str]], xlabel: str, unit: str, colours: dict[str, str]) -> str:
+    """Inline SVG of utility against privacy; each point (with its error bars) carries the filter
+    attributes and a hover text naming lens, attacker and both intervals. ``points`` pairs a point
+    with its threat view."""
+    xr = _range([v for p, _ in points for v in (p.privacy_low, p.privacy_high)])
+    yr = _range([v for p, _ in points for v in (p.utility_low, p.utility_high)])
+    sx = _scale(*xr, _PAD_L, _SVG_W - _PAD_R)
+    sy = _scale(*yr, _SVG_H - _PAD_B, _PAD_T)
+    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{_SVG_W}" height="{_SVG_H}" '
+             f'viewBox="0 0 {_SVG_W} {_SVG_H}" role="img" aria-label="{_e(xlabel)}">']
+    for tick in MaxNLocator(6).tick_values(*xr):
+        if xr[0] <= tick <= xr[1]:
+            x = sx(tick)
+            parts.append(f'<line class="grid" x1="{x:.1f}" y1="{_PAD_T}" x2="{x:.1f}" y2="{_SVG_H - _PAD_B}"/>'
+                         f'<text x="{x:.1f}" y="{_SVG_H - _PAD_B + 16}" text-anchor="middle">{tick:g}</text>')
+    for tick in MaxNLocator(6).tick_values(*yr):
+        if yr[0] <= tick <= yr[1]:
+            y = sy(tick)
+            parts.append(f'<line class="grid" x1="{_PAD_L}" y1="{y:.1f}" x2="{_SVG_W - _PAD_R}" y2="{y:.1f}"/>'
+                         f'<text x="{_PAD_L - 6}" y="{y + 4:.1f}" text-anchor="end">{tick:g}</text>')
+    parts.append(f'<line class="axis" x1="{_PAD_L}" y1="{_SVG_H - _PAD_B}" x2="{_SVG_W - _PAD_R}" '
+                 f'y2="{_SVG_H - _PAD_B}"/><line class="axis" x1="{_PAD_L}" y1="{_PAD_T}" x2="{_PAD_L}" '
+                 f'y2="{_SVG_H - _PAD_B}"/>')
+    parts.append(f'<text x="{(_PAD_L + _SVG_W - _PAD_R) / 2}" y="{_SVG_H - 10}" text-anchor="middle">'
+                 f'{_e(xlabel)} (lower = more private)</text>')
+    parts.append(f'<text transform="translate(14 {(_SVG_H - _PAD_B + _PAD_T) / 2}) rotate(-90)" '
+                 f'text-anchor="middle">utility mIoU (higher = more useful)</text>')
+    for p, threat in points:
+        tip = (f"{p.lens} ({p.profile}, {p.scenes}; {threat})\nworst-case attacker: {p.attacker}\n"
+               f"{xlabel}: {p.privacy:.3g}{unit} [{p.privacy_low:.3g}, {p.privacy_high:.3g}]\n"
+               f"mIoU: {p.utility:.3f} [{p.utility_low:.3f}, {p.utility_high:.3f}]\nbars: {p.error}")
+        x, y, colour = sx(p.privacy), sy(p.utility), colours[p.lens]
+        parts.append(
+            f'<g class="point" {_filter_attrs(p.profile, p.scenes, threat)} data-lens="{_e(p.lens)}" '
+            f'data-tip="{_e(tip)}" stroke="{colour}">'
+            f'<line x1="{sx(p.privacy_low):.1f}" y1="{y:.1f}" x2="{sx(p.privacy_high):.1f}" y2="{y:.1f}"/>'
+            f'<line x1="{x:.1f}" y1="{sy(p.utility_low):.1f}" x2="{x:.1f}" y2="{sy(p.utility_high):.1f}"/>'
+            f'<circle cx="{x:.1f}" cy="{y:.1f}" r="5" fill="{colour}" fill-opacity="0.8"/></g>')
+    parts.append("</svg>")
+    return "".join(parts)
+
+
+def _points_by_threat(entries: Sequence[Entry], privacy: str, kind: str, scale: float
+                      ) -> list[tuple[TradeoffPoint, str]]:
+    out = []
+    for e in entries:
+        for threat, attacks in threat_views(e):
+            view = e if attacks is None else _restricted(e, attacks)
+            out += [(p, threat) for p in tradeoff_points([view], privacy, kind, scale)]
+    return out
+
+
+def _restricted(entry: Entry, attacks: set[str]) -> Entry:
+    """The entry with only the given attack chains (and its lens, utility and bound rows)."""
+    keep = [r for r in entry.rows if r.attack in attacks or r.kind in ("lens", "utility", "bound")]
+    return dataclasses.replace(entry, rows=keep)
+
+
+def _options(name: str, label: str, values: Sequence[str], default: str, with_all: bool) -> str:
+    opts = ['<option value="*">all</option>'] if with_all else []
+    opts += [f'<option value="{_e(v)}"{" selected" if v == default else ""}>{_e(v)}</option>' for v in values]
+    return f'<label>{_e(label)} <select data-filter="{name}" id="filter-{name}">{"".join(opts)}</select></label>'
+
+
+def findings_html(entries: Sequence[Entry]) -> str:
+    lines = findings_lines(entries)
+    if not lines:
+        return "<p>No paper finding applies to these entries (they need both lenses of a claim in one profile).</p>"
+    head = "".join(f"<th>{_e(h)}</th>" for h in FINDINGS_HEAD)
+    rows = "".join("<tr>" + "".join(f"<td>{_e(cell)}</td>" for cell in line) + "</tr>" for line in lines)
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>"
+
+
+def violations_html(found: Sequence[tuple[Entry, Any]]) -> str:
+    """The "Ceiling violations" section's body: every reader above its lens's ideal-observer ceiling."""
+    if not found:
+        return ("<p>None: every reader of every entry whose lens the ideal-observer study covers reads at or below "
+                "its ceiling (T = 1, upper 95 % limit; accuracy over all readable plates, Wilson 95 %).</p>")
+    rows = "".join(f'<tr class="violation"><td>{_e(e.lens)}</td><td>{_e(e.profile)}</td><td>{_e(e.scenes)}</td>'
+                   f"<td>{_e(v.measured.reader)}</td><td>{100 * v.measured.accuracy:.1f}</td>"
+                   f"<td>{100 * v.measured.interval[0]:.1f}-{100 * v.measured.interval[1]:.1f}</td>"
+                   f"<td>{v.measured.n_plates}</td><td>{100 * v.ceiling_high:.1f}</td></tr>" for e, v in found)
+    return (f'<p class="alarm"><strong>{len(found)} reader(s) beat the ideal observer\'s ceiling: a modelling or '
+            "scoring error (benchmark.results.observer.consistency).</strong></p><table><thead><tr><th>lens</th>"
+            "<th>profile</th><th>scenes</th><th>reader</th><th>plate acc %</th><th>95 % interval</th><th>plates</th>"
+            f"<th>ceiling % (upper 95 %)</th></tr></thead><tbody>{rows}</tbody></table>")
+
+
+def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequence[Path],
+              study: Mapping[str, Any] | None = None, violations: Sequence[tuple[Entry, Any]] = ()) -> str:
+    """The whole page as text (deterministic: the same entries give the same bytes); `study`: the
+    ideal-observer study, `violations`: the readers above its ceilings (benchmark.results.observer.published)."""
+    lenses = list(dict.fromkeys(e.lens for e in entries))
+    colours = {lens: _PALETTE[i % len(_PALETTE)] for i, lens in enumerate(lenses)}
+    threats = [ANY_THREAT] + sorted({t for e in entries for t, _ in threat_views(e)} - {ANY_THREAT})
+    filters = "".join([
+        _options("profile", "profile", list(dict.fromkeys(e.profile for e in entries)), "*", True),
+        _options("scenes", "scenes", list(dict.fromkeys(e.scenes for e in entries)), "*", True),
+        _options("threat", "threat model", threats, ANY_THREAT, False)])
+    svgs = []
+    for privacy, kind, scale, label, unit in (("psnr_db", "restorer", 1.0, "worst-case attacker PSNR dB", " dB"),
+                                              ("plate_acc", "reader", 100.0, "worst-case plate accuracy %", " %")):
+        points = _points_by_threat(entries, privacy, kind, scale)
+        for profile in dict.fromkeys(p.profile for p, _ in points):  # budgets are not comparable: a chart each
+            mine = [(p, t) for p, t in points if p.profile == profile]
+            svgs.append(f'<figure data-filtered="1" data-profile="{_e(profile)}">'
+                        f"{tradeoff_svg(mine, label, unit, colours)}<figcaption>Profile {_e(profile)}: utility "
+                        f"against {_e(label)}; hover a point for the lens, the attacker and the intervals."
+                        "</figcaption></figure>")
+    samples = [p for p in pictures if not p.name.startswith("plate_width__")]
+    per_lens = []
+    for lens in lenses:
+        mine = [p for p in samples if p.name.split("__")[0] == lens]
+        if mine:
+            imgs = "".join(f'<p>{_e(p.stem)}</p><img loading="lazy" src="samples/{_e(p.name)}" alt="{_e(p.stem)}">'
+                           for p in mine)
+            per_lens.append(f"<details><summary>{_e(lens)}</summary>{imgs}</details>")
+    static = "".join(f'<figure><img loading="lazy" src="charts/{_e(p.name)}" alt="{_e(p.stem)}">'
+                     f"<figcaption>{_e(p.stem)}</figcaption></figure>" for p in charts)
+    return "\n".join([
+        "<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
+        '<meta name="viewport" content="width=device-width, initial-scale=1">',
+        '<link rel="icon" href="data:,">', "<title>Privacy Lens Bench leaderboard</title>",
+        f"<style>{_STYLE}</style></head><body>",
+        "<h1>Privacy Lens Bench leaderboard</h1>",
+        "<p>Rendered by <code>python -m benchmark report</code> from <code>leaderboard/entries/*.json</code>; "
+        "mean ± standard deviation over the seeds listed. Worst case = the strongest attacker of the suite for that "
+        "lens, or of the chosen threat model (ranked on the seeds every attacker ran). Click a column header to sort.</p>",
+        f'<div class="filters">{filters}<span class="count" id="shown"></span></div>',
+        "<h2>Utility against privacy</h2>", tradeoff_table(entries, study),
+        "<h2>Ceiling violations</h2>", violations_html(violations),
+        f'<h2>Utility against privacy, interactive</h2><div class="charts">{"".join(svgs)}</div>',
+        "<h2>The paper's findings on these entries</h2>", findings_html(entries),
+        "<h2>Samples per lens</h2>", "".join(per_lens) or "<p>No published sample images.</p>",
+        f'<h2>Charts</h2><div class="charts">{static}</div>',
+        '<div id="tip" role="tooltip"></div>', f"<script>{_SCRIPT}</script>", "</body></html>", ""])
+
+
+def write_page(path: Path, entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequence[Path],
+               study: Mapping[str, Any] | None = None, violations: Sequence[tuple[Entry, Any]] = ()) -> Path:
+    """Write the page to `path` (chart and picture paths are linked relative to its folder)."""
+    atomic_write_text(path, page_html(entries, charts, pictures, study, violations))
+    return path

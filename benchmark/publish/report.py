@@ -1,0 +1,131 @@
+"""Render the leaderboard from its entries alone (`python -m benchmark report`): README.md (tables),
+charts/*.png and index.html (the web page)."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+from benchmark.store.cache import atomic_write_text
+from benchmark.results.charts import save_figure
+from benchmark.results.charts.attacker_speed import write_attacker_speed_chart
+from benchmark.publish.profile_chart import write_profile_chart
+from benchmark.results.charts.tradeoff import write_tradeoff_chart
+from benchmark.results.entries import LEADERBOARD, Entry, display_order, load_entries
+from benchmark.publish.page import write_page
+from benchmark.publish.tables import attacker_table, findings_table, main_table, violations_table
+from benchmark.results.observer.published import entry_violations, load_study
+
+log = logging.getLogger(__name__)
+
+INTRO = ("Rendered by `python -m benchmark report` from `leaderboard/entries/*.json` (written by "
+         "`python -m benchmark run ... --publish`); never edited by hand. Mean ± standard deviation over the seeds "
+         "listed. Worst case = the strongest attacker of the suite for that lens (ranked on the seeds every attacker "
+         "ran, then shown over all of its seeds); W_5% = the plate width below which "
+         "the attack-independent bound certifies that no attacker reads more than 5 % of plates: Fano = the Gaussian "
+         "information bound (lenses.bound), ideal observer = the Bayesian ideal observer's ceiling "
+         "(benchmark.results.observer, `studies/ideal_observer.json`, T = 1 and 30 frames), shown only where the study "
+         "used the entry's own lens spec (else \"not computed\"); ceiling % at 32 px = the most any attacker can "
+         "read of 32 px plates exactly. Publishing merges "
+         "with a stored entry of the same lens and profile: an attacker row keeps the seeds (listed in the attacker "
+         "table) and the provenance of the run that measured it. Findings are decided by paired comparisons on the "
+         "same scenes and plates (benchmark.publish.findings): paired bootstrap (stratified by seed) for mIoU and the "
+         "worst-case PSNR, McNemar's exact test for the best reader's plate accuracy; 'cannot tell' where the "
+         "sample cannot separate the lenses or an entry carries no per-unit outcomes.")
+
+
+def study_charts(directory: Path, charts: Path) -> list[Path]:
+    """Charts of the modelling-choice studies found in `directory`/studies (see benchmark.studies)."""
+    from benchmark.results.charts.studies import psf_grid_figure, utility_size_figure
+    from benchmark.results.charts.utility_pretrain import pretrain_figure
+    written = []
+    for name, figure in (("psf_grid", psf_grid_figure), ("utility_size", utility_size_figure),
+                         ("utility_pretrain", pretrain_figure)):
+        path = directory / "studies" / f"{name}.json"
+        if path.is_file():
+            written.append(save_figure(figure(json.loads(path.read_text())), charts / f"{name}.png", dpi=100))
+    return written
+
+
+def entry_charts(entries: list[Entry], charts: Path) -> list[Path]:
+    """The leaderboard's charts of its entries (those with data to show)."""
+    return [p for p in (
+        write_tradeoff_chart(entries, charts / "utility_vs_psnr.png", "psnr_db", "restorer",
+                             "worst-case attacker PSNR dB"),
+        write_tradeoff_chart(entries, charts / "utility_vs_plates.png", "plate_acc", "reader",
+                             "worst-case plate accuracy %", 100.0),
+        write_attacker_speed_chart(entries, charts / "attackers_speed_vs_psnr.png"),
+        write_profile_chart(entries, charts / "profiles.png"),
+    ) if p is not None]
+
+
+def observer_chart(directory: Path, entries: list[Entry], charts: Path) -> list[Path]:
+    """The ideal-observer ceiling against plate width with the entries' readers on it (if the study exists)."""
+    from benchmark.results.charts.ideal_observer import write_ideal_observer_chart
+    study = load_study(directory)
+    return [] if study is None else [write_ideal_observer_chart(study, entries, charts / "ideal_observer.png")]
+
+
+def violations_text(found: list) -> list[str]:
+    """The README's "Ceiling violations" section (never left out: it says so when there are none)."""
+    if not found:
+        return ["None: every reader of every entry whose lens the ideal-observer study covers reads at or below its "
+                "ceiling (T = 1, upper 95 % limit; the reader's accuracy over all readable plates, Wilson 95 %)."]
+    return [f"**{len(found)} reader(s) beat the ideal observer's ceiling: a modelling or scoring error "
+            "(benchmark.results.observer.consistency).**", "", violations_table(found)]
+
+
+def readme_text(entries: list[Entry], charts: list[Path], pictures: list[Path], study: dict | None = None,
+                violations: list | None = None) -> str:
+    """The leaderboard README: tables, then the charts and the published pictures (paths relative)."""
+    findings = findings_table(entries)
+    text = ["# Leaderboard", "", INTRO, "",
+            "The same tables, sortable and filterable by profile, scenes and threat model, with interactive "
+            "charts: [index.html](index.html) (a self-contained page; open it from disk).", "",
+            "## Utility against privacy", "", main_table(entries, study), "",
+            "## Ceiling violations", "", *violations_text(violations or []), "",
+            *(["## The paper's findings on these entries", "", findings, ""] if findings else []),
+            "## Every attacker", "", attacker_table(entries), "", "## Charts", ""]
+    text += [f"![{p.stem}](charts/{p.name})" for p in charts]
+    widths = [p for p in pictures if p.name.startswith("plate_width__")]
+    samples = [p for p in pictures if p not in widths]
+    if widths:
+        text += ["", "## Plate accuracy against plate width (one chart per published run)", ""]
+        text += [f"![{p.stem}](samples/{p.name})" for p in widths]
+    if samples:
+        text += ["", "## Sample images", ""] + [f"![{p.stem}](samples/{p.name})" for p in samples]
+    return "\n".join(text) + "\n"
+
+
+def render(directory: Path = LEADERBOARD) -> list[Path]:
+    """Write README.md, charts/*.png and index.html of the leaderboard in `directory` from its entries."""
+    entries = display_order(load_entries(directory))
+    charts = directory / "charts"
+    charts.mkdir(parents=True, exist_ok=True)
+    written = entry_charts(entries, charts) + study_charts(directory, charts) + observer_chart(directory, entries,
+                                                                                               charts)
+    pictures = sorted((directory / "samples").glob("*.png")) if (directory / "samples").is_dir() else []
+    study = load_study(directory)
+    violations = entry_violations(entries, study)  # each one logged as an ERROR there
+    readme = directory / "README.md"
+    atomic_write_text(readme, readme_text(entries, written, pictures, study, violations))
+    page = write_page(directory / "index.html", entries, written, pictures, study, violations)
+    for path in (readme, *written, page):
+        log.debug("wrote %s", path)
+    return [readme, *written, page]
+
+
+README_START, README_END = "<!-- results:start -->", "<!-- results:end -->"
+
+
+def update_readme(readme: Path, directory: Path = LEADERBOARD) -> bool:
+    """Replace the rendered results table between the markers of the project README (if present)."""
+    text = readme.read_text()
+    if README_START not in text or README_END not in text:
+        return False
+    entries = display_order(load_entries(directory))
+    head, rest = text.split(README_START, 1)
+    _, tail = rest.split(README_END, 1)
+    atomic_write_text(readme, f"{head}{README_START}\n{main_table(entries, load_study(directory))}\n{README_END}{tail}")
+    return True

@@ -1,0 +1,84 @@
+"""Ship a lens-independent trained attacker's weights in the package: ``python -m benchmark pretrain-attacker``.
+
+Only ``nafnet-generic`` qualifies (its training knows no lens, see ``attacks.nafnet_generic``). The
+command fits it exactly as a run does (the profile's budget, the TRAIN crops of the seed; loaded from
+the cache when a run already trained it), then writes ``attacks/weights/nafnet-generic-<profile>-s<seed>
+.safetensors`` and its provenance: the cache key the attacker will look it up by, the commit, the
+fit seconds (None when it came from the cache), and a check score that
+``tests/attacks/test_shipped_weights.py`` re-measures: the mean PSNR on ``CHECK_CROPS`` training crops
+degraded by a fixed draw of the generic degradations, before and after the network.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+from safetensors.torch import save as save_safetensors
+
+import lenses
+from attacks.degradations import degrade
+from attacks.gray_world import gray_world_balance
+from attacks.nafnet_generic import NafnetGeneric
+from attacks.restorer_training import collect_pairs
+from attacks.shipped_weights import write_shipped
+from benchmark.store.cache import cache_root
+from benchmark.results.metrics import psnr
+from benchmark.store.profiles import Profile, get_profile
+from benchmark.store.provenance import git_commit, package_versions
+from benchmark.runner.config import RunConfig
+from benchmark.runner.tasks import fit_context
+
+__all__ = ["CHECK_CROPS", "CHECK_SEED", "check_scores", "generic_context", "main"]
+
+CHECK_CROPS = 8        # training crops of the recorded check
+CHECK_SEED = 20261124  # seed of the check's degradation draw
+
+
+def generic_context(profile: Profile, seed: int, cache_dir: Path) -> Any:
+    """The fit context a run gives ``nafnet-generic`` (the lens only supplies pairs it ignores)."""
+    cfg = RunConfig(lenses=["ideal"], attacks=["nafnet-generic"], scenes="synthetic", profile=profile, seeds=[seed],
+                    cache_dir=cache_dir)
+    lens = lenses.load("ideal", profile=profile, seed=seed, cache_dir=cache_dir, scenes="synthetic")
+    return fit_context(lens, cfg, seed, None)
+
+
+def check_scores(attacker: NafnetGeneric, ctx: Any) -> dict[str, float]:
+    """Mean PSNR (dB) of ``CHECK_CROPS`` sharp training crops degraded by a fixed draw, before
+    (gray-world balanced, as the network sees them) and after ``attacker.restore``."""
+    _, sharp = collect_pairs(ctx.train_pairs, CHECK_CROPS)
+    degraded = degrade(sharp, torch.Generator().manual_seed(CHECK_SEED))
+    with torch.no_grad():
+        restored = attacker.restore(degraded)
+    return {"crops": int(sharp.shape[0]), "seed": CHECK_SEED,
+            "psnr_in_db": float(psnr(gray_world_balance(degraded).clamp(0, 1), sharp).mean()),
+            "psnr_out_db": float(psnr(restored, sharp).mean())}
+
+
+def main(args: argparse.Namespace) -> int:
+    """`python -m benchmark pretrain-attacker` (arguments from `benchmark.cli`): fit or load, then ship."""
+    profile = get_profile(args.profile)
+    commit = git_commit()
+    ctx = generic_context(profile, args.seed, cache_root())
+    attacker = NafnetGeneric(backend="torch", use_shipped=False)
+    t0 = time.perf_counter()
+    attacker.fit(ctx)
+    fit_s = time.perf_counter() - t0
+    assert attacker.network is not None and attacker.budget is not None
+    model = attacker.network
+    state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
+    key = attacker.cache_key(ctx)
+    made = {"commit": commit, "command": f"python -m benchmark pretrain-attacker {args.attacker} --profile "
+                                         f"{args.profile} --seed {args.seed}",
+            "profile": args.profile, "seed": args.seed, "trained_here": attacker.trained,
+            "fit_s": round(fit_s, 1) if attacker.trained else None, "threads": torch.get_num_threads(),
+            "packages": package_versions(), "check": check_scores(attacker, ctx)}
+    path = write_shipped(f"{args.attacker}-{args.profile}-s{args.seed}", attacker.name, key,
+                         save_safetensors(state, metadata={"kind": attacker.name}), made, args.out)
+    check = made["check"]
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB) and its provenance; check PSNR "
+          f"{check['psnr_in_db']:.2f} -> {check['psnr_out_db']:.2f} dB on {check['crops']} crops")
+    return 0

@@ -1,0 +1,127 @@
+"""Utility against privacy: one panel per profile, the worst-case attacker's figure per lens with
+its interval as error bars, labels in a column with leader lines (never overlapping), the Pareto front."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+from matplotlib.figure import Figure
+
+from benchmark.results.charts import new_figure, save_figure
+from benchmark.results.charts.labels import LABEL_FONT_PT, label_points, line_height_in
+from benchmark.results.entries import Entry, Stat
+
+_MARKERS = "osD^v<>pP*Xh"
+# Panel geometry in inches: the label column sits right of the axes, outside them.
+_LEFT_IN, _AXES_W_IN, _LABELS_W_IN = 0.85, 5.2, 2.3
+_TOP_IN, _BOTTOM_IN, _MIN_AXES_H_IN = 0.45, 0.65, 2.8
+# Narrowest axis spans: x in dB or %, y in mIoU.
+_MIN_X_SPAN, _MIN_Y_SPAN = 2.0, 0.02
+
+
+@dataclasses.dataclass(frozen=True)
+class TradeoffPoint:
+    """One lens of one profile: utility (mIoU) against its strongest attacker's privacy figure.
+
+    ``*_low``/``*_high`` bound the error bar: the 95 % interval where the rows carry one, else
+    mean -/+ the seed std (``error`` says which)."""
+
+    lens: str
+    profile: str
+    scenes: str
+    attacker: str
+    privacy: float
+    privacy_low: float
+    privacy_high: float
+    utility: float
+    utility_low: float
+    utility_high: float
+    error: str
+
+
+def _bounds(stat: Stat, scale: float) -> tuple[float, float, str]:
+    if stat.interval is not None:
+        return stat.interval[0] * scale, stat.interval[1] * scale, "95 % interval"
+    return (stat.mean - stat.std) * scale, (stat.mean + stat.std) * scale, "seed std"
+
+
+def tradeoff_points(entries: Sequence[Entry], privacy: str, kind: str, scale: float = 1.0) -> list[TradeoffPoint]:
+    """Points of every entry with a utility figure and an attacker figure `privacy` of `kind`
+    ("restorer" or "reader"), scaled by `scale` (100 for a fraction shown in %)."""
+    points = []
+    for e in entries:
+        util, worst = e.metric("utility", "miou"), e.worst_case(privacy, kind)
+        if util is None or worst is None:
+            continue
+        (stat, attacker), (u_lo, u_hi, u_err), (p_lo, p_hi, p_err) = worst, _bounds(util, 1.0), _bounds(worst[0], scale)
+        points.append(TradeoffPoint(e.lens, e.profile, e.scenes, attacker, stat.mean * scale, p_lo, p_hi,
+                                    util.mean, u_lo, u_hi, u_err if u_err == p_err else f"{p_err} / {u_err}"))
+    return points
+
+
+def pareto_front(points: list[tuple[float, float]]) -> list[int]:
+    """Indices of points not dominated when minimising x (attacker strength) and maximising y (utility)."""
+    front = []
+    for i, (x, y) in enumerate(points):
+        if not any((x2 <= x and y2 >= y) and (x2 < x or y2 > y) for j, (x2, y2) in enumerate(points) if j != i):
+            front.append(i)
+    return sorted(front, key=lambda i: points[i][0])
+
+
+def _limits(low: list[float], high: list[float], min_span: float) -> tuple[float, float]:
+    """Axis range from the data: the error bars' extent plus 8 % on each side, at least ``min_span``
+    wide (points that all agree, e.g. five lenses at 0 % plate accuracy, still get a readable axis)."""
+    lo, hi = min(low), max(high)
+    pad = max(0.08 * (hi - lo), (min_span - (hi - lo)) / 2)
+    return lo - pad, hi + pad
+
+
+def tradeoff_figure(points: Sequence[TradeoffPoint], xlabel: str) -> Figure:
+    """One panel per profile (budgets are not comparable); lens colour and marker are the same in every panel."""
+    if not points:
+        raise ValueError("no trade-off points: entries need a utility row and an attacker figure")
+    profiles = list(dict.fromkeys(p.profile for p in points))
+    lenses = sorted({p.lens for p in points})
+    colours = {lens: matplotlib.colormaps["tab20"](i % 20) for i, lens in enumerate(lenses)}
+    markers = {lens: _MARKERS[i % len(_MARKERS)] for i, lens in enumerate(lenses)}
+    heights = [max(_MIN_AXES_H_IN, sum(p.profile == prof for p in points) * line_height_in() + 0.3)
+               for prof in profiles]
+    width = _LEFT_IN + _AXES_W_IN + _LABELS_W_IN
+    total = sum(h + _TOP_IN + _BOTTOM_IN for h in heights)
+    fig = new_figure(figsize=(width, total))
+    top = total
+    for profile, axes_h in zip(profiles, heights):
+        members = [p for p in points if p.profile == profile]
+        bottom = top - _TOP_IN - axes_h
+        ax = fig.add_axes((_LEFT_IN / width, bottom / total, _AXES_W_IN / width, axes_h / total))
+        top = bottom - _BOTTOM_IN
+        for p in members:
+            ax.errorbar(p.privacy, p.utility, xerr=[[p.privacy - p.privacy_low], [p.privacy_high - p.privacy]],
+                        yerr=[[p.utility - p.utility_low], [p.utility_high - p.utility]], fmt=markers[p.lens],
+                        color=colours[p.lens], capsize=3, ms=6, lw=1)
+        front = [members[i] for i in pareto_front([(p.privacy, p.utility) for p in members])]
+        ax.plot([p.privacy for p in front], [p.utility for p in front], "--", color="grey", lw=1, label="Pareto front")
+        ax.set_xlim(*_limits([p.privacy_low for p in members], [p.privacy_high for p in members], _MIN_X_SPAN))
+        ax.set_ylim(*_limits([p.utility_low for p in members], [p.utility_high for p in members], _MIN_Y_SPAN))
+        ax.set_xlabel(xlabel + " (lower = more private)")
+        ax.set_ylabel("utility mIoU (higher = more useful)")
+        errors = ", ".join(sorted({p.error for p in members}))
+        ax.set_title(f"profile {profile}, scenes {', '.join(dict.fromkeys(p.scenes for p in members))}: "
+                     f"error bars = {errors}", fontsize=9, loc="left")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="lower right")
+        label_points(ax, [(p.privacy, p.utility) for p in members], [p.lens for p in members],
+                     [colours[p.lens] for p in members], axes_h, LABEL_FONT_PT)
+    return fig
+
+
+def write_tradeoff_chart(entries: Sequence[Entry], path: Path, privacy: str, kind: str, xlabel: str,
+                         scale: float = 1.0) -> Path | None:
+    """Write the trade-off chart of `privacy` (see tradeoff_points) to `path`; None when no entry has one."""
+    points = tradeoff_points(entries, privacy, kind, scale)
+    if not points:
+        return None
+    return save_figure(tradeoff_figure(points, xlabel), path, dpi=100, layout=False)

@@ -1,0 +1,433 @@
+"""Attack one lens: restore with every restorer, read with every reader on the sensor image and on
+each restorer's output, and score everything the same way.
+
+An attacker that raises, or returns the wrong shape, dtype, range or non-finite values, gives a
+failed row (attacker, stage, message) and never a metric; the other attackers' rows are complete.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TypeVar
+
+import torch
+from tqdm.auto import tqdm
+
+import attacks
+from benchmark.runner.budget import time_budget
+from benchmark.runner.intervals import plate_intervals, scene_intervals
+from benchmark.results.metrics import psnr, ssim
+from benchmark.runner.diagnostics.native_memory import release_free_memory
+from benchmark.results.plate_scoring import PlateOutcome, readable, score_scene, summarise
+from benchmark.runner.rows import RowBuilder, plate_units, scene_units
+from benchmark.runner.config import RunConfig
+from benchmark.scenes import Scene
+from benchmark.results.schema import Row, RowError, chain_name
+from benchmark.runner.sensing import batches
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+
+# How far outside [0, 1] a restored image may stray (float rounding of a clamp-free network).
+RANGE_TOLERANCE = 1e-4
+
+
+class OutputError(ValueError):
+    """An attacker returned something other than what its contract promises."""
+
+
+def attempt(attacker: str, stage: str, work: Callable[[], T], budget_s: float | None = None) -> T | RowError:
+    """Run `work` within `budget_s` seconds (None: no limit); any exception, or running out of
+    time, becomes the RowError of `attacker` at `stage` (and is logged)."""
+    try:
+        with time_budget(budget_s, f"{attacker} ({stage})"):
+            return work()
+    except Exception as exc:  # noqa: BLE001 - a broken plugin must not take the run down
+        log.warning("attacker %r failed at %s: %s: %s", attacker, stage, type(exc).__name__, exc)
+        return RowError(attacker, stage, f"{type(exc).__name__}: {exc}")
+
+
+def check_restored(name: str, out: object, sensor: torch.Tensor) -> torch.Tensor:
+    """`out` if it is a finite float tensor shaped like `sensor` with values in [0, 1], else OutputError."""
+    if not isinstance(out, torch.Tensor):
+        raise OutputError(f"{name}.restore returned {type(out).__name__}, not a tensor")
+    if out.shape != sensor.shape:
+        raise OutputError(f"{name}.restore returned shape {tuple(out.shape)} for input {tuple(sensor.shape)}")
+    if not out.is_floating_point():
+        raise OutputError(f"{name}.restore returned dtype {out.dtype}; expected a float tensor")
+    # One pass: a NaN anywhere makes aminmax NaN, an inf shows as the min or max.
+    low, high = (float(v) for v in torch.aminmax(out))
+    if not (math.isfinite(low) and math.isfinite(high)):
+        bad = int((~torch.isfinite(out)).sum())
+        raise OutputError(f"{name}.restore returned {bad} non-finite value(s) (NaN/inf)")
+    if low < -RANGE_TOLERANCE or high > 1 + RANGE_TOLERANCE:
+        raise OutputError(f"{name}.restore returned values in [{low:.4g}, {high:.4g}]; expected [0, 1]")
+    return out.float().clamp(0, 1)
+
+
+def check_reads(name: str, reads: object, n_images: int) -> list[list[attacks.PlateRead]]:
+    """`reads` if it is one list of PlateRead per image, else OutputError."""
+    if not isinstance(reads, list) or len(reads) != n_images:
+        got = f"a list of {len(reads)}" if isinstance(reads, list) else type(reads).__name__
+        raise OutputError(f"{name}.read returned {got} for {n_images} image(s); expected one list per image")
+    for per_image in reads:
+        if not isinstance(per_image, list) or not all(isinstance(r, attacks.PlateRead) for r in per_image):
+            raise OutputError(f"{name}.read must return lists of attacks.PlateRead, got {per_image!r:.120}")
+    return reads
+
+
+# Whole frames go to a restorer a few at a time: a network's activations grow with the pixels of its
+# batch. RED10 (width 32) on 512 x 1024 frames raised the resident peak by 2.2 GiB in batches of 8,
+# 0.6 GiB in batches of 2 and 0.3 GiB one by one, at the same speed (2.9, 2.8, 2.7 s for 8 frames, 2
+# threads; 2026-11-26); in a quick run it set the process's peak (12.0 GiB), though an evaluation alone
+# in its own process peaked only 0.17 GiB lower with it (5.53 -> 5.36 GiB). Plate windows (256 x 256 to
+# 512 x 704 in quick) are bounded the same way: RED10 on 8 windows of 512 x 576 set a fresh quick gp
+# run's peak (9.4 GiB, 2026-11-27).
+RESTORE_PIXELS_PER_BATCH = 2 * 512 * 1024
+
+
+def frames_per_batch(images: torch.Tensor, batch_size: int, max_pixels: int = RESTORE_PIXELS_PER_BATCH) -> int:
+    """How many images shaped like ``images`` (...,H,W) one call takes: ``batch_size``, fewer where
+    that would pass ``max_pixels`` pixels, at least one."""
+    return max(1, min(batch_size, max_pixels // (int(images.shape[-2]) * int(images.shape[-1]))))
+
+
+def restore_all(attacker: attacks.Restorer, sensor: torch.Tensor, batch_size: int, device: str) -> torch.Tensor:
+    """The attacker's restorations of every sensor image (N,3,H,W), checked, on the CPU, at most
+    ``batch_size`` images (and ``RESTORE_PIXELS_PER_BATCH`` pixels) per call."""
+    outs = []
+    with torch.no_grad():
+        for b in batches(sensor, frames_per_batch(sensor, batch_size)):
+            outs.append(check_restored(attacker.name, attacker.restore(b.to(device)), b.to(device)).cpu())
+    return torch.cat(outs)
+
+
+def shape_batches(images: torch.Tensor | Sequence[torch.Tensor], size: int, max_pixels: int | None = None
+                  ) -> Iterator[tuple[int, torch.Tensor]]:
+    """(index of the first image, batch (B,3,H,W)) over `images`: a tensor (N,3,H,W) in slices of
+    `size`, or a sequence of (3,h,w) tensors in runs of consecutive equal shapes, at most `size` each
+    and, given `max_pixels`, at most that many pixels (at least one image)."""
+    if isinstance(images, torch.Tensor):
+        for start in range(0, images.shape[0], size):
+            yield start, images[start:start + size]
+        return
+    start = 0
+    while start < len(images):
+        end = start + 1
+        limit = size if max_pixels is None else frames_per_batch(images[start], size, max_pixels)
+        while end < len(images) and end - start < limit and images[end].shape == images[start].shape:
+            end += 1
+        yield start, torch.stack(list(images[start:end]))
+        start = end
+
+
+def restore_windows(attacker: attacks.Restorer, windows: Sequence[torch.Tensor], batch_size: int, device: str
+                    ) -> list[torch.Tensor]:
+    """The attacker's restorations (3,h,w) of sensor windows of several sizes, checked, on the CPU, at
+    most ``batch_size`` windows (and ``RESTORE_PIXELS_PER_BATCH`` pixels) per call."""
+    outs: list[torch.Tensor] = []
+    with torch.no_grad():
+        for _, b in shape_batches(windows, batch_size, RESTORE_PIXELS_PER_BATCH):
+            outs.extend(check_restored(attacker.name, attacker.restore(b.to(device)), b.to(device)).cpu())
+    return outs
+
+
+METRIC_CHUNK = 8
+
+
+def restoration_metrics(restored: torch.Tensor, sharp: torch.Tensor) -> tuple[dict[str, float], dict[str, list[float]]]:
+    """Mean PSNR (dB) and SSIM of restored vs sharp (N,3,H,W), n_images; and the per-image values.
+
+    A per-image PSNR is infinite only for an exact copy; the mean is then left out, never inf.
+    Scored METRIC_CHUNK images at a time: SSIM's float64 intermediates for 64 quick scenes at once
+    are about 10 GB.
+    """
+    per_image: dict[str, list[float]] = {"psnr_db": [], "ssim": []}
+    for start in range(0, sharp.shape[0], METRIC_CHUNK):
+        x, ref = restored[start:start + METRIC_CHUNK], sharp[start:start + METRIC_CHUNK]
+        per_image["psnr_db"] += psnr(x, ref).tolist()
+        per_image["ssim"] += ssim(x, ref).tolist()
+    metrics = {"n_images": float(sharp.shape[0])}
+    for name, values in per_image.items():
+        if all(torch.isfinite(torch.tensor(values))):
+            metrics[name] = float(torch.tensor(values, dtype=torch.float64).mean())
+    return metrics, per_image
+
+
+def read_plates(reader: attacks.Reader, images: torch.Tensor | Sequence[torch.Tensor], scenes: list[Scene],
+                batch_size: int, device: str, segment: Callable[[torch.Tensor], torch.Tensor] | None = None
+                ) -> tuple[list[PlateOutcome], dict[str, float], list[list[attacks.PlateRead]]]:
+    """Run a reader over images (N,3,H,W), or plate windows (3,h,w) of several sizes, batch-wise and
+    score it against the scenes' plates (one scene record per image).
+
+    Returns the per-plate outcomes, the timing (``images_per_s``, and ``<stage>_s_per_image`` for
+    readers that keep ``stage_seconds``, like lpdr), n_images and the reads per image.
+    """
+    outcomes: list[PlateOutcome] = []
+    all_reads: list[list[attacks.PlateRead]] = []
+    stages_before = dict(getattr(reader, "stage_seconds", {}))
+    t0 = time.perf_counter()
+    chunks: list[list[Scene]] = []
+
+    def inputs() -> Iterator[tuple[torch.Tensor, attacks.ReadHints]]:
+        for start, batch in shape_batches(images, batch_size):
+            chunk = scenes[start:start + batch.shape[0]]
+            chunks.append(chunk)
+            yield batch.to(device), attacks.ReadHints(
+                vehicle_boxes=[[v.box_xyxy for v in s.vehicles] for s in chunk], segment=segment,
+                plate_boxes=[[p.box_xyxy for p in s.plates] for s in chunk])
+
+    # One call for every batch: a reader may share work across them (lpdr recognises all crops together).
+    batches = inputs()
+    with torch.no_grad():
+        per_batch = reader.read_batches(batches)
+    if next(batches, None) is not None:  # a batch never read would silently drop its plates from the score
+        raise OutputError(f"{reader.name}.read_batches took {len(chunks) - 1} batch(es) and left the rest "
+                          "unread; it must read every batch it is given")
+    if not isinstance(per_batch, list) or len(per_batch) != len(chunks):
+        got = f"{len(per_batch)} batches" if isinstance(per_batch, list) else type(per_batch).__name__
+        raise OutputError(f"{reader.name}.read_batches returned {got} for {len(chunks)}; expected one list per batch")
+    for batch_reads, chunk in zip(per_batch, chunks):
+        reads = check_reads(reader.name, batch_reads, len(chunk))
+        for r, scene in zip(reads, chunk):
+            outcomes.extend(score_scene(r, scene))
+        all_reads.extend(reads)
+    n_images = len(images)
+    timing = {"images_per_s": n_images / (time.perf_counter() - t0), "n_images": float(n_images)}
+    for stage, seconds in getattr(reader, "stage_seconds", {}).items():
+        timing[f"{stage}_s_per_image"] = (seconds - stages_before.get(stage, 0.0)) / n_images
+    return outcomes, timing, all_reads
+
+
+@dataclass
+class PlateSet:
+    """The plate images of one lens and seed: one window per scored plate (benchmark.scenes.windows).
+
+    ``scenes`` are the windows as scene records (each holds its one scored plate, in window
+    pixels), ``sharp`` and ``sensor`` their images (3,h,w) in [0,1]; ``n_frames`` the frames
+    they were cut from."""
+
+    scenes: list[Scene]
+    sharp: list[torch.Tensor]
+    sensor: list[torch.Tensor]
+    n_frames: int
+
+
+@dataclass
+class Target:
+    """What the attackers of one lens and seed see: sharp scenes, sensor images and the fit context."""
+
+    lens_name: str
+    scenes: list[Scene]
+    sharp: torch.Tensor                 # (N,3,H,W) in [0,1]
+    sensor: torch.Tensor                # (N,3,H,W) in [0,1]; the sharp scenes themselves for lens `sharp`
+    ctx: attacks.FitContext
+    segment_sensor: Callable[[torch.Tensor], torch.Tensor] | None   # lens's own net on sensor images
+    segment_restored: Callable[[torch.Tensor], torch.Tensor] | None  # clean net on restored images
+    plates: PlateSet | None = None      # where plates are read; None: on the scenes themselves
+
+
+@dataclass
+class Attacked:
+    """Rows, per-plate records and restored images of one lens and seed."""
+
+    rows: list[Row] = field(default_factory=list)
+    plates: list[dict] = field(default_factory=list)
+    restored: dict[str, torch.Tensor] = field(default_factory=dict)
+    reads: dict[str, list[list[attacks.PlateRead]]] = field(default_factory=dict)
+    described: dict[str, dict] = field(default_factory=dict)  # restorer name -> describe()
+    references: set[str] = field(default_factory=set)          # restorers marked `reference`
+    # restorer -> {window index: restored window}, only the windows the plate gallery shows
+    # (gallery_windows): the others are read as soon as they are restored, then dropped.
+    restored_plates: dict[str, dict[int, torch.Tensor]] = field(default_factory=dict)
+    # Reader rows and plate records, per reader in chain order (sensor first, then each restorer),
+    # kept apart while restorers and readers interleave; `finish` appends them to rows / plates.
+    reader_rows: dict[str, list[Row]] = field(default_factory=dict)
+    reader_plates: dict[str, list[dict]] = field(default_factory=dict)
+
+    def finish(self) -> None:
+        """Move the reader rows and plate records after the restorer rows, reader by reader."""
+        for name in list(self.reader_rows):
+            self.rows.extend(self.reader_rows.pop(name))
+            self.plates.extend(self.reader_plates.pop(name, []))
+
+
+def run_restorers(target: Target, restorers: list[attacks.Restorer], fitted: dict[str, dict], cfg: RunConfig,
+                  rows: RowBuilder, out: Attacked, readers: Sequence[ReadyReader] = ()) -> None:
+    """Restore with each restorer (fitted by its own task: `fitted[name]` = that task's meta), score
+    it, and read its output with each of `readers` (the chains) before the next restorer, so that
+    only one restorer's plate windows are in memory at a time.
+
+    `restorers` is consumed: each restorer is dropped from it once scored, so that its network and
+    inference session (about 1 GB for a quick NAFNet in ONNX Runtime) go, and the memory they held
+    goes back to the system (``release_free_memory``), before the next one loads."""
+    with tqdm(total=len(restorers), desc=f"{target.lens_name} restorers", leave=False) as bar:
+        while restorers:
+            _restore_and_score(restorers.pop(0), target, fitted, cfg, rows, out, readers)
+            release_free_memory()
+            bar.update()
+
+
+def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[str, dict], cfg: RunConfig,
+                       rows: RowBuilder, out: Attacked, readers: Sequence[ReadyReader]) -> None:
+    """One restorer of ``run_restorers``: restore, score, read with each reader."""
+    # A reference (e.g. the uncorrected image) is reported, but never as an attack.
+    kind = "reference" if getattr(attacker, "reference", False) else "restorer"
+    settings = {"restorer": attacker.describe()}
+    meta = fitted.get(attacker.name, {})
+    if "skipped" in meta:
+        log.info("%s on %s skipped: %s", attacker.name, target.lens_name, meta["skipped"])
+        return
+    if "error" in meta:
+        out.rows.append(rows.failed(kind, attacker.name, RowError(**meta["error"]), restorer=attacker.name,
+                                    settings=settings))
+        return
+    t0 = time.perf_counter()
+    error = attempt(attacker.name, "fit", lambda: attacker.fit(target.ctx), cfg.budget_s)  # normally a cache hit
+    fit_s = meta.get("fit_s", time.perf_counter() - t0)  # fitted here when its task's result was not kept
+    t0 = time.perf_counter()
+    restored = error if isinstance(error, RowError) else attempt(
+        attacker.name, "restore", lambda: restore_all(attacker, target.sensor, cfg.profile.batch_size, cfg.device),
+        cfg.budget_s)
+    if isinstance(restored, RowError):
+        out.rows.append(rows.failed(kind, attacker.name, restored, restorer=attacker.name, settings=settings))
+        return
+    run_s = time.perf_counter() - t0
+    # What each stage frees goes back to the system before the next (see native_memory): glibc
+    # would otherwise hold it, and a restorer's step would add up its stages' transients.
+    release_free_memory()
+    metrics, per_image = restoration_metrics(restored, target.sharp)
+    if target.plates is not None:
+        # Of the scenes only the sample picture's first one is kept (every restorer's 64 full scenes
+        # would hold gigabytes); a clone, as a slice would keep the whole batch's storage alive.
+        # Scored already, the frames go before the windows are restored and read.
+        restored = restored[:1].clone()
+    release_free_memory()
+    images: torch.Tensor | list[torch.Tensor] = restored
+    if target.plates is not None:
+        windows = attempt(attacker.name, "restore", lambda: restore_windows(
+            attacker, target.plates.sensor, cfg.profile.batch_size, cfg.device))  # type: ignore[union-attr]
+        if isinstance(windows, RowError):
+            out.rows.append(rows.failed(kind, attacker.name, windows, restorer=attacker.name, settings=settings))
+            return
+        images = windows
+    out.restored[attacker.name] = restored
+    out.described[attacker.name] = attacker.describe()
+    if kind == "reference":
+        out.references.add(attacker.name)
+    for reader in readers:
+        read_chain(target, reader, attacker.name, images, cfg, rows, out)
+        release_free_memory()
+    del restored
+    if target.plates is not None:
+        out.restored_plates[attacker.name] = {i: images[i] for i in gallery_windows(target.plates)}
+    del images
+    metrics.update({"fit_s": float(fit_s), "images_per_s": target.sharp.shape[0] / run_s})
+    row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
+                   threat_model=attacker.threat_model.value, settings={"restorer": attacker.describe()})
+    scene_intervals(row, per_image, seed=row.seed)
+    row.set_units(scene_units(target.scenes, per_image))
+    out.rows.append(row)
+    log.debug("%s on %s: resident memory %.2f GB", row.attack, target.lens_name, resident_gb())
+
+
+def resident_gb() -> float:
+    """This process's resident set size now (Linux /proc; 0.0 where it cannot be read)."""
+    try:
+        return int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e9
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
+@dataclass
+class ReadyReader:
+    """A reader after its fit: `fit_error` is the fit's RowError (every chain of it is then a
+    failed row), None when it fitted."""
+
+    reader: attacks.Reader
+    fit_error: RowError | None
+
+
+def fit_readers(target: Target, readers: Sequence[attacks.Reader], cfg: RunConfig) -> list[ReadyReader]:
+    """Fit each reader that does not skip this target (a skip is logged)."""
+    ready = []
+    for reader in readers:
+        reason = reader.skip_reason(target.ctx)
+        if reason:
+            log.info("%s on %s skipped: %s", reader.name, target.lens_name, reason)
+            continue
+        error = attempt(reader.name, "fit", lambda: reader.fit(target.ctx), cfg.budget_s)
+        ready.append(ReadyReader(reader, error if isinstance(error, RowError) else None))
+    return ready
+
+
+def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
+               images: torch.Tensor | Sequence[torch.Tensor], cfg: RunConfig, rows: RowBuilder, out: Attacked) -> None:
+    """Read `images` (the sensor's when `restorer` is None, else that restorer's output; plate
+    windows when the target has them) with one fitted reader and score the chain."""
+    reader = ready.reader
+    chain = reader.name if restorer is None else chain_name(restorer, reader.name)
+    kind = "reader" if restorer is None else "reference" if restorer in out.references else "chain"
+    settings = {"reader": reader.describe(), **({"restorer": out.described[restorer]} if restorer else {})}
+    chain_rows = out.reader_rows.setdefault(reader.name, [])
+    if ready.fit_error is not None:
+        chain_rows.append(rows.failed(kind, chain, ready.fit_error, restorer=restorer, reader=reader.name,
+                                      settings=settings))
+        return
+    # The attacker with device access segments sensor images with the lens's own network,
+    # restored images with the clean one.
+    segment = target.segment_sensor if restorer is None else target.segment_restored
+    plate_scenes = target.scenes if target.plates is None else target.plates.scenes
+    result = attempt(reader.name, "read", lambda: read_plates(reader, images, plate_scenes, cfg.profile.batch_size,
+                                                               cfg.device, segment), cfg.budget_s)
+    if isinstance(result, RowError):
+        chain_rows.append(rows.failed(kind, chain, result, restorer=restorer, reader=reader.name, settings=settings))
+        return
+    outcomes, timing, out.reads[chain] = result
+    if target.plates is not None:
+        timing["n_frames"] = float(target.plates.n_frames)
+    row = rows.row(kind, {**summarise(outcomes), **timing}, attack=chain, restorer=restorer, reader=reader.name,
+                   threat_model=reader.threat_model.value, settings=settings)
+    plate_intervals(row, outcomes)
+    row.set_units(plate_units(outcomes))
+    chain_rows.append(row)
+    out.reader_plates.setdefault(reader.name, []).extend(
+        {"lens": target.lens_name, "attack": chain, "seed": row.seed, **o.__dict__} for o in outcomes)
+
+
+def read_sensor(target: Target, readers: Sequence[ReadyReader], cfg: RunConfig, rows: RowBuilder, out: Attacked
+                ) -> None:
+    """Each reader on the sensor images (the plate windows when the target has them)."""
+    for ready in readers:
+        read_chain(target, ready, None, target.sensor if target.plates is None else target.plates.sensor,
+                   cfg, rows, out)
+
+
+def run_reader(target: Target, reader: attacks.Reader, cfg: RunConfig, rows: RowBuilder, out: Attacked) -> None:
+    """Fit `reader`, read the sensor images and every restored set already in `out`, score each
+    chain; its rows go to `out.rows` (for a target without restorers, e.g. the sharp scenes)."""
+    for ready in fit_readers(target, [reader], cfg):
+        read_sensor(target, [ready], cfg, rows, out)
+        for name, images in (out.restored if target.plates is None else {}).items():
+            read_chain(target, ready, name, images, cfg, rows, out)
+    out.finish()
+
+
+def gallery_windows(plates: PlateSet, max_plates: int = 8) -> list[int]:
+    """Indices of the plate windows the run's plate gallery shows: the most common window size
+    (its images must stack), at most `max_plates` of them, widest readable plates first (the
+    gallery's own order, benchmark.results.charts.plate_gallery)."""
+    shapes = [tuple(t.shape) for t in plates.sharp]
+    if not shapes:
+        return []
+    common = max(set(shapes), key=shapes.count)
+    pick = [i for i, shape in enumerate(shapes) if shape == common]
+    widths = {i: max((p.box_xyxy[2] - p.box_xyxy[0] for p in plates.scenes[i].plates if readable(p)), default=-1)
+              for i in pick}
+    return sorted(sorted(pick, key=lambda i: -widths[i])[:max_plates])

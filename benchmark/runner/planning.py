@@ -1,0 +1,102 @@
+"""Which tasks a run needs, in an order that respects their dependencies.
+
+Tasks per seed: `clean-utility` (the shared clean segmentation net), `spectrum` (plate spectrum
+of the bound), `sharp` (reference rows on the sharp scenes); per lens and seed: `lens` (train or
+load it; lens row), `utility`, `bound`, `fit` (one per restorer: train or load it), and `evaluate`
+(restore with every restorer, read with every reader on the sensor image and on each restored
+image, sample pictures). A task is keyed by the attackers' names, never by how they were given
+(a registered name or a file path), so a file plugin is cached and found like an entry point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from benchmark.store.cache import config_hash
+from benchmark.store.provenance import git_commit
+from benchmark.runner.config import RunConfig
+
+TASK_VERSION = 2
+
+
+@dataclass(frozen=True)
+class AttackerRef:
+    """An attacker of the run: its name (what rows and keys use) and how to load it
+    (`benchmark.runner.attacker_objects.load`: a registered name, a file spec, or an object's spec).
+
+    `settings_key` is set for attackers given as Python objects (`benchmark.run`): a hash of their
+    `describe()` and source, so that the run's cache tells two instances' options apart."""
+
+    name: str
+    spec: str
+    settings_key: str = ""
+
+    @property
+    def identity(self) -> str:
+        """What keys the run's cache: the name, and the settings key of an attacker given as an object."""
+        return f"{self.name}@{self.settings_key}" if self.settings_key else self.name
+
+
+@dataclass(frozen=True)
+class Task:
+    """One unit of work; its result is an artifact addressed by `key`.
+
+    Attributes:
+        kind: clean-utility, spectrum, sharp, lens, utility, bound, fit or evaluate.
+        seed: The run seed.
+        lens: Lens name (empty for per-seed tasks).
+        restorers: Restorers the task runs (one for `fit`).
+        readers: Readers the task runs.
+        deps: Keys of the tasks whose artifacts it needs.
+        cpus, gpus: What the task asks a cluster scheduler for.
+    """
+
+    kind: str
+    seed: int
+    lens: str = ""
+    restorers: tuple[AttackerRef, ...] = ()
+    readers: tuple[AttackerRef, ...] = ()
+    deps: tuple[str, ...] = ()
+    cpus: float = 1.0
+    gpus: float = 0.0
+
+    @property
+    def key(self) -> str:
+        """File-name-safe identity: kind, seed, lens and, for a fit, the restorer's name."""
+        parts = [self.kind, f"s{self.seed}", self.lens, *(r.name for r in self.restorers if self.kind == "fit")]
+        text = "_".join(p for p in parts if p)
+        return "".join(c if c.isalnum() or c in "-_." else "-" for c in text)
+
+
+def fit_task(seed: int, lens: str, restorer: AttackerRef, deps: tuple[str, ...] = (), gpus: float = 0.0) -> Task:
+    """The task that fits `restorer` on `lens` (its key is what the evaluate task looks up)."""
+    return Task("fit", seed, lens, restorers=(restorer,), deps=deps, cpus=2, gpus=gpus)
+
+
+def run_directory(cfg: RunConfig, restorers: list[AttackerRef], readers: list[AttackerRef]) -> Path:
+    """Where a run's task results live: one folder per (configuration, code version)."""
+    key = config_hash({"version": TASK_VERSION, "commit": git_commit(), "lenses": cfg.lenses,
+                       "restorers": [r.identity for r in restorers], "readers": [r.identity for r in readers],
+                       "scenes": cfg.scenes, "profile": cfg.profile.to_dict(), "seeds": cfg.seeds,
+                       "device": cfg.device, "plate_format": cfg.plate_format, "frames": cfg.frames})
+    return Path(cfg.cache_dir) / "tasks" / key
+
+
+def plan(cfg: RunConfig, restorers: list[AttackerRef], readers: list[AttackerRef]) -> list[Task]:
+    """Tasks in an order that respects their dependencies."""
+    gpu = 1.0 if cfg.device.startswith("cuda") else 0.0
+    tasks: list[Task] = []
+    for seed in cfg.seeds:
+        clean = Task("clean-utility", seed, cpus=2, gpus=gpu)
+        spectrum = Task("spectrum", seed)
+        tasks += [clean, spectrum, Task("sharp", seed, readers=tuple(readers), deps=(clean.key,), gpus=gpu)]
+        for lens in cfg.lenses:
+            t_lens = Task("lens", seed, lens, deps=(clean.key,), cpus=2, gpus=gpu)
+            t_util = Task("utility", seed, lens, deps=(t_lens.key, clean.key), cpus=2, gpus=gpu)
+            t_bound = Task("bound", seed, lens, deps=(t_lens.key, spectrum.key))
+            fits = [fit_task(seed, lens, r, (t_lens.key,), gpu) for r in restorers]
+            t_eval = Task("evaluate", seed, lens, restorers=tuple(restorers), readers=tuple(readers),
+                          deps=(t_lens.key, t_util.key, *(f.key for f in fits)), cpus=2, gpus=gpu)
+            tasks += [t_lens, t_util, t_bound, *fits, t_eval]
+    return tasks

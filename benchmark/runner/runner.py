@@ -1,0 +1,109 @@
+"""The benchmark run: choose the attackers, plan the tasks, execute them, collect the rows.
+
+One row per lens x attack chain x seed (`benchmark.results.schema.Row`). The runner, not the attacker,
+computes every metric, so all attackers are scored the same way. Every reader runs on the
+sensor image and on every restorer's output (the chained attack: deblur, then read). An
+attacker that fails to load, fit, restore or read gives failed rows; the rest of the run goes on.
+
+Modules of a run (this package), each with one job: `config` (what is asked), `planning` (which
+tasks), `tasks` (one task, cached), `executors` (where tasks run), `evaluation` (sense, restore, read,
+score), `rows` (rows through the schema), and this module (orchestration).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import attacks
+from benchmark.runner import executors
+from benchmark.runner.planning import AttackerRef, plan, run_directory
+from benchmark.store.provenance import provenance
+from benchmark.runner.config import RunConfig
+from benchmark.results.schema import Row, RowError, settings_hash
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class RunOutput:
+    rows: list[Row]
+    settings: dict[str, dict]            # settings hash -> lens + attacker settings of the rows
+    plates: list[dict]
+    pictures: list[Path]                 # sample images written by the tasks
+    lens_info: dict[str, dict]           # per lens: learned coefficients and spec
+    bound_curves: dict[str, tuple]       # per lens: (plate widths px, Fano ceiling) of the first seed
+    failed: list[Row] = field(default_factory=list)  # the rows with status "failed"
+
+
+@dataclass(frozen=True)
+class Selection:
+    """The attackers of a run: restorers and readers that loaded, and those that did not."""
+
+    restorers: list[AttackerRef]
+    readers: list[AttackerRef]
+    failures: list[attacks.PluginFailure]
+
+
+def select_attackers(requested: list[str] | None) -> Selection:
+    """Load the requested attackers (None: every registered one run by default), one at a time.
+
+    Raises:
+        UnknownAttackError: a requested name is not registered (a typo, not a broken plugin).
+        DuplicatePluginError: two attackers of the run share a name; the message names both sources.
+    """
+    selected, failures = attacks.load_all(requested)
+    failed = {f.name for f in failures}
+    # load_all keeps the order of the request: the i-th attacker that loaded came from the i-th spec that did.
+    specs = [a.name for a in selected] if requested is None else [s for s in dict.fromkeys(requested)
+                                                                   if s not in failed]
+    chosen = [(a, spec) for a, spec in zip(selected, specs) if requested is not None or a.run_by_default]
+    return Selection([AttackerRef(a.name, spec) for a, spec in chosen if isinstance(a, attacks.Restorer)],
+                     [AttackerRef(a.name, spec) for a, spec in chosen if isinstance(a, attacks.Reader)],
+                     failures)
+
+
+def load_failure_rows(cfg: RunConfig, failures: list[attacks.PluginFailure]) -> tuple[list[Row], dict[str, dict]]:
+    """One failed row per (lens, seed) for each attacker that did not load.
+
+    Its kind is the class's when it was found (reader or restorer); an attacker whose module did
+    not even import is reported as a restorer row (its kind is unknown).
+    """
+    rows, settings = [], {}
+    for failure in failures:
+        kind = failure.kind or "restorer"
+        described = {"attack": failure.name, "load_error": failure.error}
+        key = settings_hash(described)
+        settings[key] = described
+        for seed in cfg.seeds:
+            for lens in cfg.lenses:
+                rows.append(Row.failed(kind, lens, failure.name, seed, cfg.profile.name, cfg.scenes,
+                                       RowError(failure.name, "load", failure.error), **{kind: failure.name},
+                                       settings_hash=key, provenance=provenance(cfg.device)))
+    return rows, settings
+
+
+def run(cfg: RunConfig, executor: str = "local", selection: Selection | None = None) -> RunOutput:
+    """Plan the run's tasks, execute them (locally or on Ray), and collect rows in plan order.
+
+    `selection` is `select_attackers(cfg.attacks)` when the caller has checked it already."""
+    selection = selection or select_attackers(cfg.attacks)
+    planned = plan(cfg, selection.restorers, selection.readers)
+    directory = run_directory(cfg, selection.restorers, selection.readers)
+    results = executors.get(executor).run(planned, cfg, directory)
+    rows, settings = load_failure_rows(cfg, selection.failures)
+    out = RunOutput(rows, settings, [], [], {}, {})
+    for task in planned:
+        result = results[task.key]
+        out.rows.extend(result.rows)
+        out.settings.update(result.settings)
+        out.plates.extend(result.plates)
+        out.pictures.extend(directory / task.key / name for name in result.meta.get("pictures", []))
+        if task.kind == "lens" and task.lens not in out.lens_info:
+            out.lens_info[task.lens] = {k: result.meta[k] for k in ("coefficients_um", "spec")}
+        if task.kind == "bound" and task.lens not in out.bound_curves and "curve" in result.meta:
+            curve = result.meta["curve"]
+            out.bound_curves[task.lens] = (curve["width_px"], curve["ceiling"])
+    out.failed = [r for r in out.rows if not r.ok]
+    return out
