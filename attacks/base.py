@@ -45,6 +45,17 @@ class ThreatModel(str, Enum):
     TRAINING_ADVERSARY = "training-adversary"
     """The adversary network trained jointly with the lens during co-design."""
 
+    @classmethod
+    def strongest(cls, *models: ThreatModel | str) -> ThreatModel:
+        """The strongest of `models` (values or members): members are declared weakest first, each
+        assuming what the one before it has and more (sensor images < with their sharp scenes <
+        the camera itself < the co-design's own adversary). A chain of attackers needs what its
+        strongest part needs."""
+        if not models:
+            raise ValueError("ThreatModel.strongest needs at least one threat model")
+        order = list(cls)
+        return max((cls(m) for m in models), key=order.index)
+
 
 class LensLike(Protocol):
     """The part of a ``lenses`` lens that attackers may use (structural, so tests can fake it)."""

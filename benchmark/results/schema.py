@@ -55,6 +55,7 @@ __all__ = [
     "read_results",
     "rows_of_kind",
     "settings_hash",
+    "threat_models",
     "write_results",
 ]
 
@@ -360,6 +361,26 @@ class Row:
 def chain_name(restorer: str, reader: str) -> str:
     """The attack name of a reader run on a restorer's output."""
     return f"{restorer}{CHAIN_SEPARATOR}{reader}"
+
+
+def threat_models(rows: Iterable[Row]) -> dict[str, str | None]:
+    """Each attack of `rows` (one lens's) with its threat model: a chain's is the strongest of its
+    restorer's, its reader's and its own rows' (`attacks.ThreatModel.strongest`; a chain needs what
+    its strongest part needs), so rows written before chains were labelled so read right too.
+    None for rows without one (lens, utility, bound)."""
+    from attacks import ThreatModel  # lazy: reading rows needs no torch
+
+    own: dict[str, set[str]] = {}
+    parts: dict[str, tuple[str, str]] = {}
+    for r in rows:
+        own.setdefault(r.attack, set()).update([r.threat_model] if r.threat_model else [])
+        if r.restorer is not None and r.reader is not None and r.attack == chain_name(r.restorer, r.reader):
+            parts[r.attack] = (r.restorer, r.reader)
+    out: dict[str, str | None] = {}
+    for attack, models in own.items():
+        found = set(models).union(*(own.get(p, set()) for p in parts.get(attack, ())))
+        out[attack] = ThreatModel.strongest(*found).value if found else None
+    return out
 
 
 def _finite(name: str, value: Any) -> float:

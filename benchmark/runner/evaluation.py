@@ -243,6 +243,7 @@ class Attacked:
     reads: dict[str, list[list[attacks.PlateRead]]] = field(default_factory=dict)
     described: dict[str, dict] = field(default_factory=dict)  # restorer name -> describe()
     references: set[str] = field(default_factory=set)          # restorers marked `reference`
+    threat_models: dict[str, attacks.ThreatModel] = field(default_factory=dict)  # restorer name -> its own
     # restorer -> {window index: restored window}, only the windows the plate gallery shows
     # (gallery_windows): the others are read as soon as they are restored, then dropped.
     restored_plates: dict[str, dict[int, torch.Tensor]] = field(default_factory=dict)
@@ -319,6 +320,7 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
         images = windows
     out.restored[attacker.name] = restored
     out.described[attacker.name] = attacker.describe()
+    out.threat_models[attacker.name] = attacker.threat_model
     if kind == "reference":
         out.references.add(attacker.name)
     for reader in readers:
@@ -392,8 +394,11 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
     outcomes, timing, out.reads[chain] = result
     if target.plates is not None:
         timing["n_frames"] = float(target.plates.n_frames)
+    # A chain needs what its strongest part needs (a known-PSF restorer's lens access, say).
+    threat = reader.threat_model if restorer is None else attacks.ThreatModel.strongest(
+        reader.threat_model, out.threat_models[restorer])
     row = rows.row(kind, {**summarise(outcomes), **timing}, attack=chain, restorer=restorer, reader=reader.name,
-                   threat_model=reader.threat_model.value, settings=settings)
+                   threat_model=threat.value, settings=settings)
     plate_intervals(row, outcomes)
     row.set_units(plate_units(outcomes))
     chain_rows.append(row)
