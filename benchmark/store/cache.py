@@ -13,6 +13,17 @@ Several runs (processes, Ray workers, nodes) may share one cache folder (`PLB_CA
 - `seal(path)` gives a file written by another library (a matplotlib chart) the same sidecar;
 - `exclusive(path)` is a per-task lock (an OS file lock, released by the kernel when its holder
   dies, so a crashed run never leaves a stale lock behind).
+
+Files are created readable as the user's umask allows (0644 under the usual 022), as `open()`
+would, so a cache, a run's results or the leaderboard page can be shared with other users or
+served; `tempfile` alone would leave every atomically written file 0600.
+
+Symbolic links: a lock file that is a symlink is refused (`UnsafeLockError`): opening it would
+create or touch whatever file it points at, with the rights of whoever runs the benchmark. The
+cache root (`PLB_CACHE`, or the default folder) and the folders in it are followed when they are
+symlinks: that is how a cache is moved to another disk, and whoever can plant a link in the cache
+can already rewrite what it holds. A shared cache must therefore be writable only by users who
+are trusted with each other's runs (a group folder, not a world-writable one).
 """
 
 from __future__ import annotations
@@ -24,6 +35,7 @@ import io
 import json
 import logging
 import os
+import stat
 import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
@@ -50,12 +62,29 @@ def config_hash(config: Any, length: int = 16) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:length]
 
 
+def _umask() -> int:
+    """The process's umask, read without changing it where the OS allows (Linux: /proc), since
+    setting it to read it would briefly give other threads' new files the wrong mode."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write `data` to `path` so that readers see the old file or the whole new one, never a part."""
+    """Write `data` to `path` so that readers see the old file or the whole new one, never a part.
+
+    The file gets the mode `open()` would give it (0666 less the umask), not mkstemp's private 0600."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()
@@ -171,20 +200,48 @@ def discard(path: Path) -> None:
     _checksum_path(Path(path)).unlink(missing_ok=True)
 
 
+class UnsafeLockError(OSError):
+    """A lock file is a symbolic link (or not a regular file): taking it would write elsewhere."""
+
+
+def _open_lock(lock_path: Path) -> int:
+    """A descriptor of the lock file, created if needed (mode from the umask), never through a symlink."""
+    try:
+        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o666)
+    except OSError as exc:
+        # O_NOFOLLOW on a symlink fails with ELOOP (EMLINK on some BSDs).
+        if lock_path.is_symlink():
+            raise UnsafeLockError(
+                f"lock file {lock_path} is a symbolic link (to {os.readlink(lock_path)}); refusing to follow it, "
+                "since taking the lock would create or open that file. Remove the link: locks are regular files "
+                "the benchmark creates itself") from exc
+        raise
+    if not stat.S_ISREG(os.fstat(fd).st_mode):  # a FIFO or device planted under the lock's name
+        os.close(fd)
+        raise UnsafeLockError(f"lock file {lock_path} is not a regular file; remove it (locks are regular files "
+                              "the benchmark creates itself)")
+    return fd
+
+
 @contextlib.contextmanager
 def exclusive(lock_path: Path) -> Iterator[None]:
     """Hold an exclusive lock on `lock_path` (created if needed) for the block; waits for it.
 
     The lock is the kernel's (flock): it dies with its holder, so no stale lock can block a later run.
+    A lock file that is a symlink raises `UnsafeLockError` (see the module docstring). Not reentrant:
+    a process that takes the same lock twice waits for itself.
     """
     lock_path = Path(lock_path)
     lock_path.parent.mkdir(parents=True, exist_ok=True)
-    with open(lock_path, "a+b") as handle:
-        fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
+    fd = _open_lock(lock_path)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
         try:
             yield
         finally:
-            fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
+            fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
 
 
 class ArtifactCache:
