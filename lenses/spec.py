@@ -230,17 +230,38 @@ def worst_sag_um(bounds_um: tuple[tuple[float, float], ...]) -> float:
     return float((relief.max(axis=1) - relief.min(axis=1)).max())
 
 
+# What the float32 sensor model can represent. Its noise model and the ideal observer's likelihood
+# square electron counts (variance mean + read^2, m * m summed over a frame's pixels): counts up to
+# 1e15 keep those squares (1e30) and their sums far inside float32's 3.4e38, and a real sensor
+# holds 1e3-1e6 electrons. A float32 sensor value tells 2**24 integer levels apart, hence the ADC's bits.
+MAX_ELECTRONS = 1e15
+ADC_BITS_RANGE = (1, 24)
+
+
+def _bounded(value: float, where: str, low: str, high: float) -> float:
+    if value > high:
+        raise LensSpecError(f"{where} = {value!r} is more than the float32 sensor model represents; "
+                            f"valid: {low} to {high:g}")
+    return value
+
+
 def _sensor(t: dict) -> SensorSpec:
     d = SensorSpec()
     kw: dict[str, Any] = {}
     for key in ("pixel_pitch_um", "reference_aperture_diameter_mm", "white_level_photons", "full_well_e"):
         kw[key] = _positive(t.get(key, getattr(d, key)), f"sensor.{key}")
     kw["read_noise_e"] = _positive(t.get("read_noise_e", d.read_noise_e), "sensor.read_noise_e", allow_zero=True)
+    for key in ("white_level_photons", "full_well_e", "read_noise_e"):
+        _bounded(kw[key], f"sensor.{key}", ">= 0" if key == "read_noise_e" else "> 0", MAX_ELECTRONS)
     qe = _vector(list(t.get("quantum_efficiency", list(d.quantum_efficiency))), "sensor.quantum_efficiency", 3)
     for i, q in enumerate(qe):
         if not 0.0 < q <= 1.0:
             raise LensSpecError(f"sensor.quantum_efficiency[{i}] = {q} must lie in (0, 1]")
-    kw["adc_bits"] = _integer(t.get("adc_bits", d.adc_bits), "sensor.adc_bits", 1)
+    bits = _integer(t.get("adc_bits", d.adc_bits), "sensor.adc_bits", ADC_BITS_RANGE[0])
+    if bits > ADC_BITS_RANGE[1]:
+        raise LensSpecError(f"sensor.adc_bits = {bits} is more than a float32 sensor value resolves; "
+                            f"valid: {ADC_BITS_RANGE[0]} to {ADC_BITS_RANGE[1]}")
+    kw["adc_bits"] = bits
     return SensorSpec(quantum_efficiency=qe, **kw)  # type: ignore[arg-type]
 
 
@@ -270,12 +291,21 @@ def parse_spec(raw: dict, source: str = "") -> LensSpec:
     description = raw.get("description", "")
     if not isinstance(description, str):
         raise LensSpecError(f"description must be a string, got {type(description).__name__}")
+    optics, mask, sensor = _optics(_section(raw, "optics")), _mask(_section(raw, "mask")), _sensor(_section(raw, "sensor"))
+    # The electrons a pixel collects at radiance 1 scale with the aperture's area: the two fields
+    # in range apart may still multiply past what the sensor model represents.
+    electrons = sensor.white_level_photons * (optics.aperture_diameter_mm / sensor.reference_aperture_diameter_mm) ** 2
+    if not electrons <= MAX_ELECTRONS:
+        raise LensSpecError(
+            f"sensor.white_level_photons = {sensor.white_level_photons!r} times (optics.aperture_diameter_mm / "
+            f"sensor.reference_aperture_diameter_mm)^2 = {electrons:.4g} photons per pixel, more than the float32 "
+            f"sensor model represents; valid: > 0 to {MAX_ELECTRONS:g}")
     return LensSpec(
         name=name,
         description=description,
-        optics=_optics(_section(raw, "optics")),
-        mask=_mask(_section(raw, "mask")),
-        sensor=_sensor(_section(raw, "sensor")),
+        optics=optics,
+        mask=mask,
+        sensor=sensor,
         simulation=_simulation(_section(raw, "simulation")),
         source=source,
     )

@@ -26,6 +26,13 @@ def with_(section, key, value):
     (with_("sensor", "quantum_efficiency", [0.4, 0.6]), r"sensor\.quantum_efficiency must have 3 entries"),
     (with_("sensor", "quantum_efficiency", [0.4, 1.6, 0.5]), r"sensor\.quantum_efficiency\[1\]"),
     (with_("sensor", "adc_bits", 10.5), r"sensor\.adc_bits must be an integer"),
+    # Issue 38: values the float32 sensor model cannot represent overflowed inside a task.
+    (with_("sensor", "adc_bits", 1000), r"sensor\.adc_bits = 1000 .*valid: 1 to 24"),
+    (with_("sensor", "white_level_photons", 1e300), r"sensor\.white_level_photons = 1e\+300 .*valid: > 0 to 1e\+15"),
+    (with_("sensor", "full_well_e", 1e300), r"sensor\.full_well_e = 1e\+300 .*valid: > 0 to 1e\+15"),
+    (with_("sensor", "read_noise_e", 1e20), r"sensor\.read_noise_e = 1e\+20 .*valid: >= 0 to 1e\+15"),
+    (with_("optics", "aperture_diameter_mm", 1e9),
+     r"sensor\.white_level_photons = 15000.0 times \(optics\.aperture_diameter_mm.*valid: > 0 to 1e\+15"),
     (with_("optics", "wavelengths_nm", [0.64, 0.55, 0.46]), r"wavelengths_nm\[0\].*in nm"),
     (with_("mask", "bounds_um", [[-1, 1]] * 5), r"mask\.bounds_um must be a list of 6"),
     (with_("mask", "bounds_um", [[-0.1, 0.1]] * 6), r"mask\.zernike_um\[3\] = 0.2 lies outside"),
@@ -74,3 +81,14 @@ def test_builtin_lenses_are_registered_and_honour_the_contract():
     ideal = lenses.load("ideal").psf()
     k = ideal.shape[-1]
     assert all(int(ideal[c].argmax()) == (k // 2) * k + k // 2 for c in range(3))
+
+
+def test_the_largest_representable_sensor_gives_a_finite_image(tmp_path):
+    """The edge of the valid ranges still simulates: the bounds are what the model represents."""
+    import torch
+    raw = {"name": "edge", "mask": {"zernike_um": [0, 0, 0, 0.2, 0, 0]},
+           "sensor": {"adc_bits": 24, "white_level_photons": 1e15, "full_well_e": 1e15, "read_noise_e": 1e15}}
+    path = tmp_path / "edge.toml"
+    path.write_text(spec_to_toml(parse_spec(raw)))
+    image = lenses.load(str(path))(torch.rand(1, 3, 32, 32), generator=torch.Generator().manual_seed(0))
+    assert torch.isfinite(image).all() and 0 <= float(image.min()) <= float(image.max()) <= 1
