@@ -212,3 +212,26 @@ def test_the_chart_draws_the_reader_study_per_width_bin(tmp_path):
     (tmp_path / "studies").mkdir()
     (tmp_path / "studies" / "ideal_observer_readers.json").write_text(json.dumps(readers))
     assert write_ideal_observer_chart(STUDY, (), tmp_path / "charts" / "ideal_observer.png").is_file()
+
+
+def test_a_run_check_says_in_one_line_what_it_checked_and_why_not_the_rest(tmp_path):
+    """ceiling_check.json's `summary`: the lenses checked, and per skipped lens why, naming the spec
+    fields that differ from the study's (the main job's shipped gp lens vs a study of another gp)."""
+    (tmp_path / "studies").mkdir()
+    (tmp_path / "studies" / "ideal_observer.json").write_text(json.dumps(STUDY))
+    moved = json.loads(json.dumps(DEFOCUS_SPEC))
+    moved["optics"]["focus_distance_m"] = 0.5
+    info = {"ideal": {"spec": STUDY["lenses"]["ideal"]["lens_spec"]}, "defocus": {"spec": moved},
+            "my-lens": {"spec": DEFOCUS_SPEC}}
+    records = [{"lens": "ideal", "attack": "answer-key", "width_px": 40, "correct": True} for _ in range(20)]
+    out = tmp_path / "run"
+    out.mkdir()
+    check = json.loads(published.write_run_check(out, records, info, tmp_path).read_text())
+    summary = check["summary"]
+    assert "\n" not in summary and list(check)[0] == "summary"
+    assert summary.startswith(f"checked ideal in {check['bins_checked']} width bin(s): 0 violation(s)")
+    assert "defocus not checked: the study's lens spec differs from this run's in optics.focus_distance_m" in summary
+    assert "my-lens not checked: no ideal-observer curve for this lens" in summary
+    assert check["not_checked"]["defocus"].endswith("optics.focus_distance_m")
+    nothing = published.run_violations(records, {"defocus": {"spec": moved}}, STUDY)["summary"]
+    assert nothing.startswith("nothing checked; defocus not checked")

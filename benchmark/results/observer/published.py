@@ -78,6 +78,26 @@ def same_lens(study_spec: Mapping[str, Any] | None, spec: Mapping[str, Any] | No
     return a is not None and b is not None and _same(a, b)
 
 
+def spec_differences(study_spec: Mapping[str, Any] | None, spec: Mapping[str, Any] | None, limit: int = 4
+                     ) -> list[str]:
+    """The dotted keys where two lens specs differ as today's lens code parses them (`same_lens`'s
+    comparison), at most `limit` of them; ["spec"] when either is missing or does not parse."""
+    a = None if study_spec is None else normalized_spec(study_spec, "the ideal-observer study")
+    b = None if spec is None else normalized_spec(spec, "an entry or run")
+    if a is None or b is None:
+        return ["spec"]
+    found: list[str] = []
+
+    def walk(x: Any, y: Any, path: str) -> None:
+        if isinstance(x, dict) and isinstance(y, dict):
+            for k in sorted((set(x) | set(y)) - set(_IGNORED_SPEC_KEYS)):
+                walk(x.get(k), y.get(k), f"{path}.{k}" if path else k)
+        elif not _same(x, y):
+            found.append(path)
+    walk(a, b, "")
+    return found[:limit]
+
+
 def study_record(study: Mapping[str, Any] | None, lens: str, spec: Mapping[str, Any] | None) -> dict | None:
     """The study's record of `lens` (keys t1, t30, ...) when its recorded spec matches `spec`, else None."""
     record = (study or {}).get("lenses", {}).get(lens)
@@ -149,20 +169,35 @@ def run_violations(records: Sequence[Mapping[str, Any]], lens_info: Mapping[str,
     for lens, info in lens_info.items():
         record = study_record(study, lens, info.get("spec"))
         if record is None:
-            in_study = lens in (study or {}).get("lenses", {})
-            not_checked[lens] = ("the study's lens spec differs from this run's" if in_study
-                                 else "no ideal-observer curve for this lens")
+            stored = (study or {}).get("lenses", {}).get(lens)
+            not_checked[lens] = ("no ideal-observer curve for this lens" if stored is None
+                                 else "the study's lens spec differs from this run's in "
+                                 + ", ".join(spec_differences(stored.get("lens_spec"), info.get("spec"))))
         else:
             curves[lens] = t1_curve(record)
     measured = [m for m in plate_bins(records) if m.lens in curves]
     violations = check_consistency(measured, curves)
-    return {"study": str(STUDY), "checked": sorted(curves), "not_checked": not_checked,
+    return {"summary": _summary_line(sorted(curves), not_checked, len(measured), len(violations)),
+            "study": str(STUDY), "checked": sorted(curves), "not_checked": not_checked,
             "bins_checked": len(measured),
             "violations": [{"reader": v.measured.reader, "lens": v.measured.lens, "low_px": v.measured.low_px,
                             "high_px": None if math.isinf(v.measured.high_px) else v.measured.high_px,
                             "accuracy": v.measured.accuracy, "interval": list(v.measured.interval),
                             "n_plates": v.measured.n_plates, "ceiling_high": v.ceiling_high,
                             "message": v.message()} for v in violations]}
+
+
+def _summary_line(checked: Sequence[str], not_checked: Mapping[str, str], bins: int, violations: int) -> str:
+    """ceiling_check.json's first line: what was checked, against how many width bins, and why the
+    rest was not (`leaderboard/studies/ideal_observer.json` holds a lens's ceiling only for the spec
+    it was computed for: `python -m benchmark.studies.observer_study` recomputes it)."""
+    parts = []
+    if checked:
+        parts.append(f"checked {', '.join(checked)} in {bins} width bin(s): {violations} violation(s)")
+    else:
+        parts.append("nothing checked")
+    parts += [f"{lens} not checked: {why}" for lens, why in sorted(not_checked.items())]
+    return "; ".join(parts)
 
 
 def write_run_check(out: Path, records: Sequence[Mapping[str, Any]], lens_info: Mapping[str, Mapping[str, Any]],
