@@ -381,12 +381,19 @@ class Plan:
                 cost = t.estimate.text()
             lines.append(f"  {t.key:<{width}}  {t.state:<8}  {cost}")
         todo = [t for t in self.tasks if not t.cached]
-        known = [t.estimate.seconds for t in todo if t.estimate.seconds is not None]
         summary = f"{len(self.tasks) - len(todo)} cached, {len(todo)} to compute"
         if todo:
-            summary += f"; measured estimate {sum(known):.1f} s for {len(known)} of them"
-            if len(known) < len(todo):
-                summary += f", {len(todo) - len(known)} unknown"
+            est = task_costs.total([(t.seed, t.lens, t.estimate) for t in todo])
+            counted = len(todo) - est.unknown - est.installed
+            summary += (f"; estimated total {est.seconds:.0f} s ({est.seconds / 60:.1f} min) for {counted} of them"
+                        if counted else "; no estimate")
+            if est.machines:
+                summary += ", from task costs measured on " + " and ".join(
+                    f"{m}{', ' + d if d else ''}" for m, d in est.machines) + " (load stretches it)"
+            if est.installed:
+                summary += f"; {est.installed} installed from the package (not measured apart)"
+            if est.unknown:
+                summary += f"; {est.unknown} unknown"
         lines.append(summary)
         lines += [f"attacker {f.name!r} does not load and would give failed rows: {f.error}" for f in self.failures]
         return "\n".join(lines)
@@ -420,7 +427,7 @@ def plan(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = N
         planned.append(PlannedTask(task.key, task.kind, task.seed, task.lens,
                                    tuple(r.name for r in task.restorers + task.readers), cached,
                                    task_costs.recorded(directory / task.key) if cached else None,
-                                   task_costs.estimate(task, cfg, measured)))
+                                   task_costs.estimate(task, cfg, measured, default_attackers=attacks is None)))
     return Plan(planned, directory, cfg.profile.name, selection.failures)
 
 

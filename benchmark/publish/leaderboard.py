@@ -55,7 +55,8 @@ def merge_entries(old: Entry, new: Entry) -> Entry:
     ``new`` measured successfully replace stored ones: a failed attacker is recorded without erasing
     an earlier measurement of it. The entry's spec and coefficients are its lowest seed's."""
     same = (lambda a, b: _design(a) == _design(b)) if co_designed(new.lens) else (lambda a, b: a == b)
-    if old.profile_values != new.profile_values or not same(old.lens_spec, new.lens_spec):
+    settings = lambda values: {k: v for k, v in values.items() if k != "description"}  # noqa: E731 - prose, not a setting
+    if settings(old.profile_values) != settings(new.profile_values) or not same(old.lens_spec, new.lens_spec):
         return new
     versions = old.trainer_versions(), new.trainer_versions()
     if all(versions) and versions[0] != versions[1]:  # nets trained by another trainer: not the same thing

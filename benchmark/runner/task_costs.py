@@ -4,7 +4,9 @@ Every computed task leaves `cost.json` in its result folder (`tasks.execute`): i
 seconds, what work it was (its signature: kind, lens, attackers, profile settings, scenes,
 device) and where and when it was measured (machine, device, threads, date, commit). A dry run
 estimates a planned task as the median wall time of the measurements in the cache with the same
-signature (any seed, any earlier run or commit); with none it says "unknown", never a guess.
+signature (any seed, any earlier run or commit); with none, as the shipped table of measured costs
+(`benchmark.store.measured_costs`, from docs/costs.md) gives that kind of task for the profile, naming
+the machine and date it was measured on; with neither it says "unknown", never a guess.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from typing import Any
 
 import torch
 
+from benchmark.store import measured_costs
 from benchmark.store.cache import atomic_write_text, config_hash
 from benchmark.runner.planning import Task
 from benchmark.store.provenance import describe_device, git_commit
@@ -65,27 +68,89 @@ def measurements(cache_dir: Path) -> list[dict[str, Any]]:
 
 @dataclass(frozen=True)
 class Estimate:
-    """A planned task's cost: median wall time (s) of `n` matching measurements; None when n = 0."""
+    """A planned task's cost: median wall time (s) of `n` matching measurements in the cache; with
+    none (n = 0), the shipped table's figure (`table` set: `seconds` None when the task is installed
+    from the package, `together` when the figure is one for a group of such tasks), else None."""
 
     seconds: float | None
     n: int
+    table: measured_costs.Quote | None = None
+
+    @property
+    def installed(self) -> bool:
+        return self.n == 0 and self.table is not None and self.table.seconds is None
+
+    @property
+    def together(self) -> bool:
+        return self.n == 0 and self.table is not None and self.table.together
 
     def text(self) -> str:
-        if self.seconds is None:
-            return "unknown (no measurement of this task with this profile in the cache)"
-        return f"~{self.seconds:.1f} s (median of {self.n} measured)"
+        if self.n:
+            return f"~{self.seconds:.1f} s (median of {self.n} measured)"
+        if self.table is None:
+            return "unknown (no measurement of this task with this profile in the cache or the shipped table)"
+        if self.installed:
+            return "installed from the package (not measured apart)"
+        group = " for all such fits together" if self.together else ""
+        return f"~{self.seconds:.0f} s{group} (measured on {self.table.machine}, {self.table.date})"
 
 
-def estimate(task: Task, cfg: RunConfig, measured: list[dict[str, Any]]) -> Estimate:
-    """The median measured wall time of tasks with this task's signature."""
+def estimate(task: Task, cfg: RunConfig, measured: list[dict[str, Any]], default_attackers: bool = False
+             ) -> Estimate:
+    """The median measured wall time of tasks with this task's signature in the cache; with none, the
+    shipped table's figure for its kind (`default_attackers`: the run's attackers are the default
+    ones, what the table's evaluations ran)."""
     wanted = signature(task, cfg)
     times = [m["wall_s"] for m in measured if m["signature"] == wanted]
-    return Estimate(statistics.median(times), len(times)) if times else Estimate(None, 0)
+    if times:
+        return Estimate(statistics.median(times), len(times))
+    if cfg.device != "cpu" or cfg.scenes != "synthetic":
+        return Estimate(None, 0)
+    restorer = task.restorers[0].name if task.kind == "fit" and task.restorers else None
+    quote = measured_costs.quote(cfg.profile.name, task.kind, task.seed, task.lens, restorer, default_attackers)
+    if quote is not None and quote.seconds is not None:
+        quote = quote if cfg.profile.to_dict() == _shipped_profile(cfg.profile.name) else None
+    return Estimate(quote.seconds if quote else None, 0, quote)
 
 
-def recorded(folder: Path) -> float | None:
-    """The wall time (s) recorded for the task whose result folder is `folder`, or None."""
-    try:
-        return float(json.loads((Path(folder) / COST_FILE).read_text())["wall_s"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
+def _shipped_profile(name: str) -> dict[str, Any] | None:
+    """The settings of the built-in profile `name` (the table's figures hold only for them)."""
+    from benchmark.store.profiles import PROFILES
+    return PROFILES[name].to_dict() if name in PROFILES else None
+
+
+def total(estimates: list[tuple[int, str, Estimate]]) -> Total:
+    """The sum over the (seed, lens, estimate) of the tasks to compute: a group figure (`together`)
+    counted once per seed and lens, work shared by the lenses (`once_per_seed`) once per seed,
+    installed tasks and tasks with no figure counted apart."""
+    seconds, unknown, installed = 0.0, 0, 0
+    machines: set[tuple[str, str | None]] = set()
+    groups: set[tuple[int, str, float]] = set()
+    for seed, lens, e in estimates:
+        if e.installed:
+            installed += 1
+            continue
+        if e.seconds is None:
+            unknown += 1
+            continue
+        if e.table is not None and e.n == 0:
+            machines.add((e.table.machine, e.table.date))
+        shared = e.n == 0 and e.table is not None and e.table.once_per_seed
+        if e.together or shared:
+            group = (seed, "" if shared else lens, e.seconds)
+            if group in groups:
+                continue
+            groups.add(group)
+        seconds += e.seconds
+    return Total(seconds, unknown, installed, tuple(sorted(machines, key=str)))
+
+
+@dataclass(frozen=True)
+class Total:
+    """A plan's estimated seconds, the tasks with no figure and those installed from the package, and
+    (machine, date) of every shipped-table figure in it."""
+
+    seconds: float
+    unknown: int
+    installed: int
+    machines: tuple[tuple[str, str | None], ...]

@@ -1,10 +1,16 @@
-"""Run profiles: every size, count and step budget in one place, printed with the results."""
+"""Run profiles: every size, count and step budget in one place, printed with the results.
+
+A profile's description gives what a run of it measured (`benchmark.store.measured_costs`, from
+docs/costs.md), generated, never typed in; it is prose, not a setting, so it is left out of
+`Profile.to_dict` (the settings that key cached results and leaderboard entries).
+"""
 
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
 
+from benchmark.store.measured_costs import run_text
 from lenses.registry import suggest
 
 
@@ -48,13 +54,22 @@ class Profile:
     min_readable_plates: int = 0  # per seed; 0: read plates on the n_val scenes themselves
 
     def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        """The settings (every field but the description)."""
+        d = dataclasses.asdict(self)
+        d.pop("description")
+        return d
+
+
+def _measured(purpose: str, profile: str) -> str:
+    """`purpose`, then what a run of `profile` measured (docs/costs.md via measured_costs), if any."""
+    measured = run_text(profile)
+    return f"{purpose}; measured: {measured}" if measured else purpose
 
 
 PROFILES: dict[str, Profile] = {
     p.name: p
     for p in (
-        Profile("smoke", "whole run under a minute on 2 CPU cores; for tests",
+        Profile("smoke", _measured("for tests and a first look", "smoke"),
                 image_size=(128, 256), n_val=4, n_train=8, train_crop=(64, 64), batch_size=4,
                 utility_model="tiny", adversary_width=8, pretrain_steps=4, codesign_steps=4,
                 pretrain_scenes=8, pretrain_crop=(64, 64), pretrain_batch=4, pretrain_lr=6e-4, pretrain_warmup=1,
@@ -62,7 +77,7 @@ PROFILES: dict[str, Profile] = {
                 optics_lr=2e-2, seg_lr=6e-4, deb_lr=1e-3, bound_scenes=30,
                 restorer_steps=40, nafnet_width=8, nafnet_enc_blocks=(1, 1), nafnet_middle_blocks=1,
                 nafnet_dec_blocks=(1, 1), min_readable_plates=2),
-        Profile("quick", "the CPU default: a co-designed lens in under 10 minutes on 2 cores",
+        Profile("quick", _measured("the CPU default", "quick"),
                 image_size=(512, 1024), n_val=64, n_train=64, train_crop=(128, 128), batch_size=8,
                 utility_model="b0", adversary_width=32, pretrain_steps=1800, codesign_steps=200,
                 pretrain_scenes=256, pretrain_crop=(128, 128), pretrain_batch=8, pretrain_lr=1e-3,
