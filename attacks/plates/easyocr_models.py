@@ -4,12 +4,18 @@ The benchmark has no network at run time, so EasyOCR is always created with
 ``download_enabled=False`` and pointed at the weights that package ships
 (``craft_mlt_25k.pth``: CRAFT text detector; ``english_g2.pth``: english_g2 recognizer).
 A missing or corrupt file therefore raises instead of triggering a download.
+
+EasyOCR reads its weights with ``torch.load(..., weights_only=False)``, which unpickles arbitrary
+objects: a file swapped in site-packages would run code. ``_weights_only_loads`` makes EasyOCR's
+detection and recognition modules load with ``weights_only=True`` (tensors and plain containers
+only), so such a file is refused with an ``UnpicklingError`` before anything in it runs.
 """
 
 from __future__ import annotations
 
 import functools
 import importlib
+import types
 from pathlib import Path
 from typing import Any
 
@@ -57,9 +63,36 @@ def _reader(gpu: bool, detector: bool) -> Any:
     EasyOCR creates nothing in ``~``."""
     import easyocr  # heavy import (torch, scipy, skimage), only when a reader is first used
 
+    _weights_only_loads()
     folder = str(model_dir(MODEL_FILES if detector else (RECOGNIZER_FILE,)))
     return easyocr.Reader(["en"], gpu=gpu, detector=detector, model_storage_directory=folder,
                           user_network_directory=folder, download_enabled=False, verbose=False)
+
+
+class _WeightsOnlyTorch(types.ModuleType):
+    """``torch`` as EasyOCR's modules see it: everything is torch's, but ``load`` forces
+    ``weights_only=True`` whatever the caller passes."""
+
+    def __init__(self, torch: types.ModuleType) -> None:
+        super().__init__("torch")
+        self._torch = torch
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._torch, name)
+
+    def load(self, *args: Any, **kwargs: Any) -> Any:
+        kwargs["weights_only"] = True
+        return self._torch.load(*args, **kwargs)
+
+
+def _weights_only_loads() -> None:
+    """Point the ``torch`` of EasyOCR's weight-loading modules at ``_WeightsOnlyTorch`` (idempotent)."""
+    import torch
+    from easyocr import detection, recognition
+
+    for module in (detection, recognition):
+        if not isinstance(module.torch, _WeightsOnlyTorch):
+            module.torch = _WeightsOnlyTorch(torch)  # type: ignore[attr-defined]
 
 
 load_easyocr.cache_clear = _reader.cache_clear  # type: ignore[attr-defined]
