@@ -7,7 +7,7 @@ import tempfile
 _OWN_CACHE = None if "PLB_CACHE" in os.environ else tempfile.mkdtemp(prefix="plb-test-cache-")
 if _OWN_CACHE is not None:
     os.environ["PLB_CACHE"] = _OWN_CACHE
-for var in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE", "HF_DATASETS_OFFLINE"):
+for var in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE", "HF_DATASETS_OFFLINE", "ORT_DISABLE_TELEMETRY"):
     os.environ[var] = "1"
 
 
