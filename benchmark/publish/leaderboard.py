@@ -3,12 +3,17 @@ pictures are copied, and the leaderboard is re-rendered (`python -m benchmark ru
 
 The entry format and the reading of entries live in ``benchmark.results.entries``; rendering
 (tables, charts, web page) in ``benchmark.publish.report``.
+
+Publishing reads the stored entries, merges and writes them back, then re-renders: two publishes into
+one leaderboard at once would each merge into what the other has not written yet and one run's rows
+would be lost, so a publish holds the leaderboard folder's lock (``PUBLISH_LOCK``, a kernel file lock
+that dies with its holder) from the first read to the last write.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
+import glob
 import logging
 import shutil
 from collections.abc import Iterable, Sequence
@@ -17,10 +22,13 @@ from typing import Any
 
 from benchmark.publish import report as leaderboard_report
 from benchmark.publish.findings import co_designed
-from benchmark.results.entries import LEADERBOARD, Entry, entry_name, make_entry, write_entry
+from benchmark.results.entries import LEADERBOARD, Entry, entry_name, file_safe, make_entry, read_entry, write_entry
 from benchmark.results.schema import Results, Row, read_results
+from benchmark.store.cache import exclusive
 
 log = logging.getLogger(__name__)
+# The leaderboard folder's lock file (ignored by git); see the module docstring.
+PUBLISH_LOCK = ".publish.lock"
 
 def _seed_specs(entry: Entry) -> dict[int, Any]:
     """The lens spec each seed of `entry` was measured with (from its rows' settings; a one-seed entry
@@ -84,8 +92,15 @@ def publish(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[str, d
 
     An existing entry of the same (lens, profile, scenes) is merged (``merge_entries``), so a run
     with fewer attackers (or more seeds for some of them) cannot erase a richer one; rows this run
-    measured replace the stored ones.
+    measured replace the stored ones. Holds the leaderboard's lock (see the module docstring).
     """
+    with exclusive(directory / PUBLISH_LOCK):
+        return _publish_entries(rows, profile, lens_info, directory, settings)
+
+
+def _publish_entries(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[str, dict], directory: Path,
+                     settings: dict[str, Any] | None) -> list[Path]:
+    """`publish` without taking the lock (its caller holds it)."""
     paths = []
     for lens in dict.fromkeys(r.lens for r in rows):
         info = lens_info.get(lens, {})
@@ -93,41 +108,55 @@ def publish(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[str, d
                            info.get("spec"), settings)
         path = directory / "entries" / entry_name(lens, entry.profile, entry.scenes)
         if path.exists():
-            entry = merge_entries(Entry.from_json(json.loads(path.read_text())), entry)
+            entry = merge_entries(read_entry(path), entry)
         paths.append(write_entry(path, entry))
     return paths
+
+
+def _run_pictures(out: Path, prefix: str, lens: str) -> list[Path]:
+    """A run's pictures of `lens` (`{prefix}_{lens}_seed*.png`), first seed first. The runner writes
+    a lens given as a spec path with its "/" as "_" (benchmark.runner.pictures); the glob is escaped
+    because a lens name is the user's text."""
+    return sorted(out.glob(glob.escape(f"{prefix}_{lens}_seed".replace("/", "_")) + "*.png"))
 
 
 def copy_run_pictures(out: Path, lens_names: Iterable[str], profile: str, samples: Path) -> list[Path]:
     """Copy a published run's pictures into the leaderboard: each lens's first sample grid (and
     co-design curves, for a trained lens), and the run's plate-accuracy-vs-width chart (named after
-    the run's lenses: one chart per published run)."""
+    the run's lenses: one chart per published run). Names are made file-safe (``file_safe``): a lens
+    given as a spec path names its pictures after the path with "/" as "_", as its entry is named."""
     lens_names = list(lens_names)
     samples.mkdir(parents=True, exist_ok=True)
     copied = []
     for name in lens_names:
-        first = sorted(out.glob(f"samples_{name}_seed*.png"))
+        first = _run_pictures(out, "samples", name)
         if first:
-            copied.append(Path(shutil.copyfile(first[0], samples / f"{name}__{profile}.png")))
+            copied.append(Path(shutil.copyfile(first[0], samples / f"{file_safe(name)}__{file_safe(profile)}.png")))
         # A co-designed lens's training curves (its first seed's), beside its samples.
-        curves = sorted(out.glob(f"curves_{name}_seed*.png"))
+        curves = _run_pictures(out, "curves", name)
         if curves:
-            copied.append(Path(shutil.copyfile(curves[0], samples / f"{name}__{profile}__curves.png")))
+            copied.append(Path(shutil.copyfile(curves[0],
+                                               samples / f"{file_safe(name)}__{file_safe(profile)}__curves.png")))
     chart = out / "plate_accuracy_vs_width.png"
     if chart.is_file():
-        copied.append(Path(shutil.copyfile(chart, samples / f"plate_width__{profile}__{'+'.join(lens_names)}.png")))
+        lenses = "+".join(file_safe(n) for n in lens_names)
+        copied.append(Path(shutil.copyfile(chart, samples / f"plate_width__{file_safe(profile)}__{lenses}.png")))
     return copied
 
 
 def publish_run(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[str, dict], out: Path,
                 directory: Path = LEADERBOARD, settings: dict[str, Any] | None = None) -> list[Path]:
     """Publish a run: its entries, its pictures, then re-render the leaderboard (and the project
-    README's results table when `directory` is the repository's). Returns the written entries."""
-    paths = publish(rows, profile, lens_info, directory, settings)
-    copy_run_pictures(out, lens_info, profile["name"], directory / "samples")
-    leaderboard_report.render(directory)
-    if directory == LEADERBOARD:
-        leaderboard_report.update_readme(LEADERBOARD.parent / "README.md", directory)
+    README's results table when `directory` is the repository's). Returns the written entries.
+
+    The whole of it holds the leaderboard's lock, so that a concurrent publish neither loses rows nor
+    renders over this one's pages with an older set of entries."""
+    with exclusive(directory / PUBLISH_LOCK):
+        paths = _publish_entries(rows, profile, lens_info, directory, settings)
+        copy_run_pictures(out, lens_info, profile["name"], directory / "samples")
+        leaderboard_report.render(directory)
+        if directory == LEADERBOARD:
+            leaderboard_report.update_readme(LEADERBOARD.parent / "README.md", directory)
     log.info("published %d leaderboard entries; rendered %s", len(paths), directory / "README.md")
     return paths
 

@@ -20,7 +20,7 @@ from matplotlib.ticker import MaxNLocator
 
 from benchmark.store.cache import atomic_write_text
 from benchmark.results.charts.tradeoff import TradeoffPoint, tradeoff_points
-from benchmark.results.entries import Entry
+from benchmark.results.entries import Entry, file_safe
 from benchmark.publish.tables import FINDINGS_HEAD, findings_lines, table_columns
 
 ANY_THREAT = "any attacker"
@@ -261,7 +261,9 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
     samples = [p for p in pictures if not p.name.startswith("plate_width__")]
     per_lens = []
     for lens in lenses:
-        mine = [p for p in samples if p.name.split("__")[0] == lens]
+        # Pictures are `{lens}__{profile}[__curves].png`, the lens made file-safe (publish.leaderboard), which
+        # may itself hold "__" (a spec path's "/[" become "__"): split from the right.
+        mine = [p for p in samples if p.stem.removesuffix("__curves").rsplit("__", 1)[0] == file_safe(lens)]
         if mine:
             imgs = "".join(f'<p>{_e(p.stem)}</p><img loading="lazy" src="samples/{_e(p.name)}" alt="{_e(p.stem)}">'
                            for p in mine)

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from benchmark.store.cache import atomic_write_text
+from benchmark.results.entry_checks import check_entry_json, check_rows
 from benchmark.results.schema import LEGACY_PROVENANCE, Row, Units, dumps_compact, infer_legacy_kind
 
 LEADERBOARD = Path(__file__).resolve().parents[2] / "leaderboard"
@@ -94,18 +95,31 @@ class Entry:
                 **({"unit_ids": unit_ids} if unit_ids else {})}
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> Entry:
-        """An entry of any known version (1 is migrated); errors name what is wrong."""
-        version = d.get("entry_version")
+    def from_json(cls, d: Any) -> Entry:
+        """An entry of any known version (1 is migrated); errors name the field, the value and what
+        would be valid (``benchmark.results.entry_checks``)."""
+        version = d.get("entry_version") if isinstance(d, dict) else None
         if version == 1:
             d = migrate_entry(d)
-        elif version != ENTRY_VERSION:
+        elif isinstance(d, dict) and version != ENTRY_VERSION:
             raise ValueError(f"leaderboard entry_version {version!r} is not one this code reads (1, {ENTRY_VERSION})")
-        rows = _expand_unit_ids(d["rows"], d.get("unit_ids") or {})
-        return cls(lens=d["lens"], profile=d["profile"], scenes=d["scenes"], seeds=list(d["seeds"]),
-                   profile_values=d["profile_values"], coefficients_um=d.get("coefficients_um"),
-                   lens_spec=d.get("lens_spec"), rows=[Row.from_json(r) for r in rows],
-                   settings=dict(d.get("settings") or {}))
+        check_entry_json(d)
+        rows = []
+        for i, row in enumerate(_expand_unit_ids(d["rows"], d.get("unit_ids") or {})):
+            try:
+                rows.append(Row.from_json(row))
+            except (ValueError, TypeError, KeyError, AttributeError) as exc:  # a field of the wrong type
+                raise ValueError(f"rows[{i}]: {exc}") from exc
+        entry = cls(lens=d["lens"], profile=d["profile"], scenes=d["scenes"], seeds=list(d["seeds"]),
+                    profile_values=d["profile_values"], coefficients_um=d.get("coefficients_um"),
+                    lens_spec=d.get("lens_spec"), rows=rows, settings=dict(d.get("settings") or {}))
+        entry.check()
+        return entry
+
+    def check(self) -> None:
+        """Raise ValueError naming the row and field when a row is not the entry's or a metric is out of
+        its range (``benchmark.results.entry_checks``)."""
+        check_rows(self.rows, self.lens, self.profile, self.scenes, self.seeds)
 
     def chains(self) -> list[Chain]:
         """One summary per attack chain, in the order the rows first name them (failed rows left out)."""
@@ -213,9 +227,14 @@ def _summarise(attack: str, rows: list[Row]) -> Chain:
     return Chain(attack, rows[0].kind, threat, tuple(r.seed for r in rows), metrics, notes, tuple(rows))
 
 
+def file_safe(name: str) -> str:
+    """`name` as part of a file name: every character but letters, digits, "-", "_" and "." as "_" (a
+    lens given as a spec path, `lenses/specs/defocus.toml`, is `lenses_specs_defocus.toml`)."""
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+
+
 def entry_name(lens: str, profile: str, scenes: str) -> str:
-    safe = lambda s: "".join(c if c.isalnum() or c in "-_." else "_" for c in s)  # noqa: E731
-    return f"{safe(lens)}__{safe(profile)}__{safe(scenes)}.json"
+    return f"{file_safe(lens)}__{file_safe(profile)}__{file_safe(scenes)}.json"
 
 
 # ---- version 1 -> 2 ---------------------------------------------------------------------------------
@@ -265,19 +284,28 @@ def migrate_directory(directory: Path = LEADERBOARD) -> list[Path]:
 # ---- reading and writing -------------------------------------------------------------------------
 
 def write_entry(path: Path, entry: Entry) -> Path:
-    atomic_write_text(path, dumps_compact(entry.to_json(), sort_keys=True) + "\n")
+    """Write `entry` to `path` after checking it, so that publishing never stores what reading refuses."""
+    data = entry.to_json()
+    try:
+        check_entry_json(json.loads(json.dumps(data)))  # as a reader will see it: tuples become lists
+        entry.check()
+    except ValueError as exc:
+        raise ValueError(f"{path}: refusing to write an invalid leaderboard entry: {exc}") from exc
+    atomic_write_text(path, dumps_compact(data, sort_keys=True) + "\n")
     return path
+
+
+def read_entry(path: Path) -> Entry:
+    """The entry stored at `path`; errors name the file, the field and what would be valid."""
+    try:
+        return Entry.from_json(json.loads(Path(path).read_text()))
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise ValueError(f"{path}: not a valid leaderboard entry: {exc}") from exc
 
 
 def load_entries(directory: Path = LEADERBOARD) -> list[Entry]:
     """Every entry of `directory`/entries, in file-name order; errors name the file."""
-    entries = []
-    for path in sorted((directory / "entries").glob("*.json")):
-        try:
-            entries.append(Entry.from_json(json.loads(path.read_text())))
-        except (ValueError, KeyError, TypeError) as exc:
-            raise ValueError(f"{path}: not a valid leaderboard entry: {exc}") from exc
-    return entries
+    return [read_entry(path) for path in sorted((directory / "entries").glob("*.json"))]
 
 
 def display_order(entries: Sequence[Entry]) -> list[Entry]:
