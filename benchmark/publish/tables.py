@@ -15,6 +15,7 @@ from typing import Any
 
 from benchmark.publish.findings import check_findings
 from benchmark.results.entries import Entry, Stat
+from benchmark.results.markdown import md_cell
 from benchmark.results.observer.published import NOT_COMPUTED, study_record
 
 # A cell: its text and the number it sorts by (None: empty).
@@ -138,8 +139,9 @@ def table_columns(study: Mapping[str, Any] | None) -> tuple[Column, ...]:
 
 
 def _markdown(head: Sequence[str], lines: Sequence[Sequence[str]]) -> str:
+    """A Markdown table; cells hold names from plugins and entries, so each is made inert (md_cell)."""
     out = ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] * len(head)) + "|"]
-    return "\n".join(out + ["| " + " | ".join(cells) + " |" for cells in lines])
+    return "\n".join(out + ["| " + " | ".join(md_cell(c) for c in cells) + " |" for cells in lines])
 
 
 def main_table(entries: Sequence[Entry], study: Mapping[str, Any] | None = None) -> str:

@@ -9,6 +9,7 @@ from pathlib import Path
 import pandas as pd
 
 from benchmark.store.cache import atomic_write_text
+from benchmark.results.markdown import md_cell, md_code
 from benchmark.results.schema import Row, threat_models
 
 ID_COLUMNS = ["lens", "attack", "profile", "scenes"]
@@ -107,7 +108,7 @@ def markdown_table(table: pd.DataFrame) -> str:
             text = _fmt(v)
             if text and col + CI_LOW in table.columns and not pd.isna(table[col + CI_LOW].iloc[i]):
                 text += f" [{_fmt(float(table[col + CI_LOW].iloc[i]))}, {_fmt(float(table[col + CI_HIGH].iloc[i]))}]"
-            cells.append(text)
+            cells.append(md_cell(text))  # lens and attacker names are plugins' text
         shown[col] = cells
         if f"{col}_std" in table.columns and col + CI_LOW in table.columns:  # timings: the mean only
             shown[f"{col} seed sd"] = [_fmt(float(v)) for v in table[f"{col}_std"]]
@@ -120,8 +121,9 @@ def failures_markdown(rows: Sequence[Row]) -> str:
     if not failed:
         return ""
     lines = ["| lens | attack | seed | attacker | stage | error |", "|---|---|---|---|---|---|"]
-    lines += [f"| {r.lens} | {r.attack} | {r.seed} | {r.error.attacker} | {r.error.stage} | "
-              f"{r.error.message.replace('|', '/').splitlines()[0] if r.error.message else ''} |" for r in failed]
+    lines += ["| " + " | ".join(md_cell(c) for c in (r.lens, r.attack, r.seed, r.error.attacker, r.error.stage,
+                                                     r.error.message.splitlines()[0] if r.error.message else ""))
+              + " |" for r in failed]
     return "\n".join(lines)
 
 
@@ -142,7 +144,7 @@ def sectioned_markdown(rows: Sequence[Row]) -> str:
     if failures:
         parts += ["### Failed attackers (no metric; see results.json)", "", failures, ""]
     profile, scenes = rows[0].profile, rows[0].scenes
-    return (f"Profile `{profile}`, scenes `{scenes}`; each metric as mean over seeds [95 % interval: from the "
+    return (f"Profile {md_code(profile)}, scenes {md_code(scenes)}; each metric as mean over seeds [95 % interval: from the "
             "lowest seed's lower limit to the highest seed's upper limit]; with several seeds, the seed standard "
             "deviation in its own column. A chain's threat model is the strongest of its parts.\n\n"
             + "\n".join(parts))
