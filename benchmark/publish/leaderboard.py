@@ -6,7 +6,7 @@ The entry format and the reading of entries live in ``benchmark.results.entries`
 
 Publishing reads the stored entries, merges and writes them back, then re-renders: two publishes into
 one leaderboard at once would each merge into what the other has not written yet and one run's rows
-would be lost, so a publish holds the leaderboard folder's lock (``PUBLISH_LOCK``, a kernel file lock
+would be lost, so a publish holds the leaderboard folder's lock (``report.locked``, a kernel file lock
 that dies with its holder) from the first read to the last write.
 """
 
@@ -24,11 +24,8 @@ from benchmark.publish import report as leaderboard_report
 from benchmark.publish.findings import co_designed
 from benchmark.results.entries import LEADERBOARD, Entry, entry_name, file_safe, make_entry, read_entry, write_entry
 from benchmark.results.schema import Results, Row, read_results
-from benchmark.store.cache import exclusive
 
 log = logging.getLogger(__name__)
-# The leaderboard folder's lock file (ignored by git); see the module docstring.
-PUBLISH_LOCK = ".publish.lock"
 
 def _seed_specs(entry: Entry) -> dict[int, Any]:
     """The lens spec each seed of `entry` was measured with (from its rows' settings; a one-seed entry
@@ -94,22 +91,16 @@ def publish(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[str, d
     with fewer attackers (or more seeds for some of them) cannot erase a richer one; rows this run
     measured replace the stored ones. Holds the leaderboard's lock (see the module docstring).
     """
-    with exclusive(directory / PUBLISH_LOCK):
-        return _publish_entries(rows, profile, lens_info, directory, settings)
-
-
-def _publish_entries(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[str, dict], directory: Path,
-                     settings: dict[str, Any] | None) -> list[Path]:
-    """`publish` without taking the lock (its caller holds it)."""
     paths = []
-    for lens in dict.fromkeys(r.lens for r in rows):
-        info = lens_info.get(lens, {})
-        entry = make_entry(lens, [r for r in rows if r.lens == lens], profile, info.get("coefficients_um"),
-                           info.get("spec"), settings)
-        path = directory / "entries" / entry_name(lens, entry.profile, entry.scenes)
-        if path.exists():
-            entry = merge_entries(read_entry(path), entry)
-        paths.append(write_entry(path, entry))
+    with leaderboard_report.locked(directory):
+        for lens in dict.fromkeys(r.lens for r in rows):
+            info = lens_info.get(lens, {})
+            entry = make_entry(lens, [r for r in rows if r.lens == lens], profile, info.get("coefficients_um"),
+                               info.get("spec"), settings)
+            path = directory / "entries" / entry_name(lens, entry.profile, entry.scenes)
+            if path.exists():
+                entry = merge_entries(read_entry(path), entry)
+            paths.append(write_entry(path, entry))
     return paths
 
 
@@ -151,8 +142,8 @@ def publish_run(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[st
 
     The whole of it holds the leaderboard's lock, so that a concurrent publish neither loses rows nor
     renders over this one's pages with an older set of entries."""
-    with exclusive(directory / PUBLISH_LOCK):
-        paths = _publish_entries(rows, profile, lens_info, directory, settings)
+    with leaderboard_report.locked(directory):
+        paths = publish(rows, profile, lens_info, directory, settings)
         copy_run_pictures(out, lens_info, profile["name"], directory / "samples")
         leaderboard_report.render(directory)
         if directory == LEADERBOARD:

@@ -1,13 +1,21 @@
 """Render the leaderboard from its entries alone (`python -m benchmark report`): README.md (tables),
-charts/*.png and index.html (the web page)."""
+charts/*.png and index.html (the web page).
+
+Rendering holds the leaderboard folder's lock (``locked``), which publishing holds from reading the
+stored entries to its own render (benchmark.publish.leaderboard): a render that read the entries
+before a concurrent publish wrote its rows must not write its pages after that publish's.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 
-from benchmark.store.cache import atomic_write_text
+from benchmark.store.cache import atomic_write_text, exclusive
 from benchmark.results.charts import save_figure
 from benchmark.results.charts.attacker_speed import write_attacker_speed_chart
 from benchmark.publish.profile_chart import write_profile_chart
@@ -18,6 +26,27 @@ from benchmark.publish.tables import attacker_table, findings_table, main_table,
 from benchmark.results.observer.published import entry_violations, load_study
 
 log = logging.getLogger(__name__)
+
+# The leaderboard folder's lock file (ignored by git).
+LOCK_FILE = ".publish.lock"
+_held = threading.local()  # the leaderboards this thread holds the lock of (a flock is not reentrant)
+
+
+@contextlib.contextmanager
+def locked(directory: Path) -> Iterator[None]:
+    """Hold the lock of the leaderboard in `directory` (a kernel file lock, released when its holder
+    dies); waits for it. Reentrant within a thread, so that a publish holding it can render."""
+    key = str(Path(directory).resolve())
+    held: set[str] = _held.__dict__.setdefault("paths", set())
+    if key in held:
+        yield
+        return
+    with exclusive(Path(directory) / LOCK_FILE):
+        held.add(key)
+        try:
+            yield
+        finally:
+            held.discard(key)
 
 INTRO = ("Rendered by `python -m benchmark report` from `leaderboard/entries/*.json` (written by "
          "`python -m benchmark run ... --publish`); never edited by hand. Mean ± standard deviation over the seeds "
@@ -99,7 +128,13 @@ def readme_text(entries: list[Entry], charts: list[Path], pictures: list[Path], 
 
 
 def render(directory: Path = LEADERBOARD) -> list[Path]:
-    """Write README.md, charts/*.png and index.html of the leaderboard in `directory` from its entries."""
+    """Write README.md, charts/*.png and index.html of the leaderboard in `directory` from its entries
+    (holding its lock, see the module docstring)."""
+    with locked(directory):
+        return _render(directory)
+
+
+def _render(directory: Path) -> list[Path]:
     entries = display_order(load_entries(directory))
     charts = directory / "charts"
     charts.mkdir(parents=True, exist_ok=True)
@@ -120,7 +155,13 @@ README_START, README_END = "<!-- results:start -->", "<!-- results:end -->"
 
 
 def update_readme(readme: Path, directory: Path = LEADERBOARD) -> bool:
-    """Replace the rendered results table between the markers of the project README (if present)."""
+    """Replace the rendered results table between the markers of the project README (if present), holding
+    the leaderboard's lock (a concurrent publish must not be overwritten by an older table)."""
+    with locked(directory):
+        return _update_readme(readme, directory)
+
+
+def _update_readme(readme: Path, directory: Path) -> bool:
     text = readme.read_text()
     if README_START not in text or README_END not in text:
         return False

@@ -1,14 +1,18 @@
 """Two publishes into one leaderboard at once keep both runs' rows (issue 38, item 2): publishing
-holds the leaderboard folder's lock from reading the stored entry to rendering the pages."""
+holds the leaderboard folder's lock from reading the stored entry to rendering the pages, and a
+render alone waits for it."""
 
 from __future__ import annotations
 
 import multiprocessing
+import threading
 import time
 
 from benchmark.publish import leaderboard
+from benchmark.publish import report as leaderboard_report
 from benchmark.results.entries import read_entry
 from benchmark.results.schema import Row
+from benchmark.store.cache import exclusive
 
 PROFILE = {"name": "smoke", "n_val": 4, "image_size": [128, 256]}
 
@@ -56,3 +60,17 @@ def test_two_concurrent_publishes_keep_both_runs_rows(tmp_path):
     readme = (board / "README.md").read_text()
     assert all(f"| ideal | {attack} |" in readme
                for attack in ("identity", "wiener-known-psf", "richardson-lucy-known-psf"))
+
+
+def test_a_render_waits_for_a_publish_in_progress(tmp_path):
+    # `report` alone renders; run beside a publish it must not write pages from entries read before
+    # that publish wrote its rows, so it waits for the leaderboard's lock.
+    board = tmp_path / "board"
+    leaderboard.publish(_rows("identity", "first"), PROFILE, {}, board)
+    with exclusive(board / leaderboard_report.LOCK_FILE):  # what a publish in another process holds
+        renderer = threading.Thread(target=leaderboard_report.render, args=(board,))
+        renderer.start()
+        renderer.join(1.0)
+        assert renderer.is_alive() and not (board / "README.md").exists()
+    renderer.join(60)
+    assert not renderer.is_alive() and "| ideal | identity |" in (board / "README.md").read_text()
