@@ -6,7 +6,7 @@ The entry format and the reading of entries live in ``benchmark.results.entries`
 
 Publishing reads the stored entries, merges and writes them back, then re-renders: two publishes into
 one leaderboard at once would each merge into what the other has not written yet and one run's rows
-would be lost, so a publish holds the leaderboard folder's lock (``report.locked``, a kernel file lock
+would be lost, so a publish holds the leaderboard folder's lock (``entries.locked``, a kernel file lock
 that dies with its holder) from the first read to the last write.
 """
 
@@ -22,7 +22,8 @@ from typing import Any
 
 from benchmark.publish import report as leaderboard_report
 from benchmark.publish.findings import co_designed
-from benchmark.results.entries import LEADERBOARD, Entry, entry_name, file_safe, make_entry, read_entry, write_entry
+from benchmark.results.entries import (LEADERBOARD, Entry, entry_name, file_safe, locked, make_entry, read_entry,
+                                       write_entry)
 from benchmark.results.schema import Results, Row, read_results
 
 log = logging.getLogger(__name__)
@@ -92,7 +93,7 @@ def publish(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[str, d
     measured replace the stored ones. Holds the leaderboard's lock (see the module docstring).
     """
     paths = []
-    with leaderboard_report.locked(directory):
+    with locked(directory):
         for lens in dict.fromkeys(r.lens for r in rows):
             info = lens_info.get(lens, {})
             entry = make_entry(lens, [r for r in rows if r.lens == lens], profile, info.get("coefficients_um"),
@@ -142,7 +143,7 @@ def publish_run(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[st
 
     The whole of it holds the leaderboard's lock, so that a concurrent publish neither loses rows nor
     renders over this one's pages with an older set of entries."""
-    with leaderboard_report.locked(directory):
+    with locked(directory):
         paths = publish(rows, profile, lens_info, directory, settings)
         copy_run_pictures(out, lens_info, profile["name"], directory / "samples")
         leaderboard_report.render(directory)

@@ -1,52 +1,28 @@
 """Render the leaderboard from its entries alone (`python -m benchmark report`): README.md (tables),
 charts/*.png and index.html (the web page).
 
-Rendering holds the leaderboard folder's lock (``locked``), which publishing holds from reading the
-stored entries to its own render (benchmark.publish.leaderboard): a render that read the entries
-before a concurrent publish wrote its rows must not write its pages after that publish's.
+Rendering holds the leaderboard folder's lock (``benchmark.results.entries.locked``), which publishing
+holds from reading the stored entries to its own render (benchmark.publish.leaderboard): a render that
+read the entries before a concurrent publish wrote its rows must not write its pages after that publish's.
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
-import threading
-from collections.abc import Iterator
 from pathlib import Path
 
-from benchmark.store.cache import atomic_write_text, exclusive
+from benchmark.store.cache import atomic_write_text
 from benchmark.results.charts import save_figure
 from benchmark.results.charts.attacker_speed import write_attacker_speed_chart
 from benchmark.publish.profile_chart import write_profile_chart
 from benchmark.results.charts.tradeoff import write_tradeoff_chart
-from benchmark.results.entries import LEADERBOARD, Entry, display_order, load_entries
+from benchmark.results.entries import LEADERBOARD, Entry, display_order, load_entries, locked
 from benchmark.publish.page import write_page
 from benchmark.publish.tables import attacker_table, findings_table, main_table, violations_table
 from benchmark.results.observer.published import entry_violations, load_study
 
 log = logging.getLogger(__name__)
-
-# The leaderboard folder's lock file (ignored by git).
-LOCK_FILE = ".publish.lock"
-_held = threading.local()  # the leaderboards this thread holds the lock of (a flock is not reentrant)
-
-
-@contextlib.contextmanager
-def locked(directory: Path) -> Iterator[None]:
-    """Hold the lock of the leaderboard in `directory` (a kernel file lock, released when its holder
-    dies); waits for it. Reentrant within a thread, so that a publish holding it can render."""
-    key = str(Path(directory).resolve())
-    held: set[str] = _held.__dict__.setdefault("paths", set())
-    if key in held:
-        yield
-        return
-    with exclusive(Path(directory) / LOCK_FILE):
-        held.add(key)
-        try:
-            yield
-        finally:
-            held.discard(key)
 
 INTRO = ("Rendered by `python -m benchmark report` from `leaderboard/entries/*.json` (written by "
          "`python -m benchmark run ... --publish`); never edited by hand. Mean ± standard deviation over the seeds "

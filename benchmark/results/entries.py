@@ -26,18 +26,20 @@ chain over the seeds (mean, seed std, per-seed values, 95 % interval where the r
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import hashlib
 import json
 import math
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from benchmark.store.cache import atomic_write_text
+from benchmark.store.cache import atomic_write_text, exclusive
 from benchmark.results.entry_checks import check_entry_json, check_rows
 from benchmark.results.schema import LEGACY_PROVENANCE, Row, Units, dumps_compact, infer_legacy_kind
 
@@ -271,17 +273,42 @@ def migrate_entry(old: dict[str, Any]) -> dict[str, Any]:
 
 
 def migrate_directory(directory: Path = LEADERBOARD) -> list[Path]:
-    """Rewrite every stored entry of `directory`/entries that is older than ENTRY_VERSION; returns those."""
+    """Rewrite every stored entry of `directory`/entries that is older than ENTRY_VERSION; returns those.
+    Holds the leaderboard's lock (a publish must not merge into an entry being rewritten)."""
     rewritten = []
-    for path in sorted((directory / "entries").glob("*.json")):
-        raw = json.loads(path.read_text())
-        if raw.get("entry_version") != ENTRY_VERSION:
-            write_entry(path, Entry.from_json(raw))
-            rewritten.append(path)
+    with locked(directory):
+        for path in sorted((directory / "entries").glob("*.json")):
+            raw = json.loads(path.read_text())
+            if raw.get("entry_version") != ENTRY_VERSION:
+                write_entry(path, Entry.from_json(raw))
+                rewritten.append(path)
     return rewritten
 
 
 # ---- reading and writing -------------------------------------------------------------------------
+
+# The leaderboard folder's lock file (ignored by git): publishing, migrating and rendering
+# read entries, then write entries or pages from them, and must not interleave.
+LOCK_FILE = ".publish.lock"
+_held = threading.local()  # the leaderboards this thread holds the lock of (a flock is not reentrant)
+
+
+@contextlib.contextmanager
+def locked(directory: Path) -> Iterator[None]:
+    """Hold the lock of the leaderboard in `directory` (a kernel file lock, released when its holder
+    dies); waits for it. Reentrant within a thread, so that a publish holding it can render."""
+    key = str(Path(directory).resolve())
+    held: set[str] = _held.__dict__.setdefault("paths", set())
+    if key in held:
+        yield
+        return
+    with exclusive(Path(directory) / LOCK_FILE):
+        held.add(key)
+        try:
+            yield
+        finally:
+            held.discard(key)
+
 
 def write_entry(path: Path, entry: Entry) -> Path:
     """Write `entry` to `path` after checking it, so that publishing never stores what reading refuses."""

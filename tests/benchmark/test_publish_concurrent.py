@@ -10,7 +10,7 @@ import time
 
 from benchmark.publish import leaderboard
 from benchmark.publish import report as leaderboard_report
-from benchmark.results.entries import read_entry
+from benchmark.results.entries import LOCK_FILE, migrate_directory, read_entry
 from benchmark.results.schema import Row
 from benchmark.store.cache import exclusive
 
@@ -62,15 +62,18 @@ def test_two_concurrent_publishes_keep_both_runs_rows(tmp_path):
                for attack in ("identity", "wiener-known-psf", "richardson-lucy-known-psf"))
 
 
-def test_a_render_waits_for_a_publish_in_progress(tmp_path):
-    # `report` alone renders; run beside a publish it must not write pages from entries read before
-    # that publish wrote its rows, so it waits for the leaderboard's lock.
+def test_a_render_or_a_migration_waits_for_a_publish_in_progress(tmp_path):
+    # `report` alone renders (and `report --migrate` rewrites entries); beside a publish neither may
+    # write from entries read before that publish wrote its rows, so both wait for the lock.
     board = tmp_path / "board"
     leaderboard.publish(_rows("identity", "first"), PROFILE, {}, board)
-    with exclusive(board / leaderboard_report.LOCK_FILE):  # what a publish in another process holds
-        renderer = threading.Thread(target=leaderboard_report.render, args=(board,))
-        renderer.start()
-        renderer.join(1.0)
-        assert renderer.is_alive() and not (board / "README.md").exists()
-    renderer.join(60)
-    assert not renderer.is_alive() and "| ideal | identity |" in (board / "README.md").read_text()
+    with exclusive(board / LOCK_FILE):  # what a publish in another process holds
+        workers = [threading.Thread(target=f, args=(board,)) for f in (leaderboard_report.render, migrate_directory)]
+        for worker in workers:
+            worker.start()
+        time.sleep(1.0)
+        assert all(w.is_alive() for w in workers) and not (board / "README.md").exists()
+    for worker in workers:
+        worker.join(60)
+    assert not any(w.is_alive() for w in workers)
+    assert "| ideal | identity |" in (board / "README.md").read_text()
