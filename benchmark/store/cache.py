@@ -29,6 +29,7 @@ are trusted with each other's runs (a group folder, not a world-writable one).
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import hashlib
 import io
@@ -201,7 +202,8 @@ def discard(path: Path) -> None:
 
 
 class UnsafeLockError(OSError):
-    """A lock file is a symbolic link (or not a regular file): taking it would write elsewhere."""
+    """A lock file is a symbolic link (or not a regular file): taking it would write elsewhere. Its
+    `filename` is the lock's path and its `strerror` says what to do (the CLI prints both)."""
 
 
 def _open_lock(lock_path: Path) -> int:
@@ -212,14 +214,14 @@ def _open_lock(lock_path: Path) -> int:
         # O_NOFOLLOW on a symlink fails with ELOOP (EMLINK on some BSDs).
         if lock_path.is_symlink():
             raise UnsafeLockError(
-                f"lock file {lock_path} is a symbolic link (to {os.readlink(lock_path)}); refusing to follow it, "
-                "since taking the lock would create or open that file. Remove the link: locks are regular files "
-                "the benchmark creates itself") from exc
+                errno.ELOOP, f"this lock file is a symbolic link (to {os.readlink(lock_path)}); refusing to follow "
+                "it, since taking the lock would create or open that file. Remove the link: locks are regular files "
+                "the benchmark creates itself", str(lock_path)) from exc
         raise
     if not stat.S_ISREG(os.fstat(fd).st_mode):  # a FIFO or device planted under the lock's name
         os.close(fd)
-        raise UnsafeLockError(f"lock file {lock_path} is not a regular file; remove it (locks are regular files "
-                              "the benchmark creates itself)")
+        raise UnsafeLockError(errno.EINVAL, "this lock file is not a regular file; remove it (locks are regular "
+                              "files the benchmark creates itself)", str(lock_path))
     return fd
 
 

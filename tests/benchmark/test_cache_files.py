@@ -2,6 +2,7 @@
 items 11 and 12): modes follow the umask, a symlinked lock is refused, a symlinked root is followed."""
 
 import os
+import re
 import stat
 
 import pytest
@@ -41,9 +42,12 @@ def test_a_symlinked_lock_is_refused_and_its_target_never_created(tmp_path):
     lock = tmp_path / "cache" / ".task.lock"
     lock.parent.mkdir()
     lock.symlink_to(target)
-    with pytest.raises(UnsafeLockError, match=r"\.task\.lock is a symbolic link .*victim.*Remove the link"):
+    with pytest.raises(UnsafeLockError) as refused:
         with exclusive(lock):
             pytest.fail("the lock was taken through a symlink")
+    assert refused.value.filename == str(lock)  # an OSError's path and reason: what the CLI prints
+    assert re.fullmatch(r"this lock file is a symbolic link \(to .*victim\); refusing .* Remove the link.*",
+                        refused.value.strerror)
     assert not target.exists()
     # A link to an existing file leaves that file as it was.
     target.write_bytes(b"precious")
