@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import logging
-import shutil
 import tempfile
 import time
 from collections.abc import Mapping, Sequence
@@ -43,6 +42,7 @@ from benchmark.runner.config import RunConfig, training_scenes
 from benchmark.scenes import PLATE_FORMAT, SCENE_SETS, load_scenes, plate_entropy_bits
 from benchmark.results.schema import Row, read_results, write_results
 from benchmark.results.schema import Results as ResultsFile
+from benchmark.runner.pictures import copy_picture
 from benchmark.runner.tasks import is_cached
 
 if TYPE_CHECKING:
@@ -58,6 +58,8 @@ AttackerLike = str | type[attacks.Attack] | attacks.Attack
 ID_COLUMNS = ("kind", "lens", "attack", "restorer", "reader", "seed", "profile", "scenes", "status", "threat_model",
               "error_attacker", "error_stage", "error_message", "settings_hash")
 CI_LOW, CI_HIGH = "_ci_low", "_ci_high"
+# The rows of the tasks completed so far, rewritten as each completes (a run that dies leaves them).
+PARTIAL_RESULTS = "results.partial.json"
 
 
 # ---- discovery ------------------------------------------------------------------------------------
@@ -197,7 +199,8 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
     log.info("profile %s: %s", cfg.profile.name, cfg.profile.to_dict())
     t0 = time.perf_counter()
     try:
-        output = runner.run(cfg, executor=executor, selection=selection)
+        output = runner.run(cfg, executor=executor, selection=selection,
+                            partial=folder / PARTIAL_RESULTS if folder is not None else None)
     except BaseException:
         if created and folder is not None and not any(folder.iterdir()):
             folder.rmdir()
@@ -207,6 +210,7 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
     results = Results(output.rows, output.settings, run_meta, folder, output)
     if folder is not None:
         write_run_outputs(folder, results)
+        (folder / PARTIAL_RESULTS).unlink(missing_ok=True)  # the whole results.json replaces it
     return results
 
 
@@ -323,7 +327,7 @@ def write_run_outputs(out: Path, results: Results) -> None:
     output = results.output
     assert output is not None, "only a run's own results carry its pictures and plate records"
     for picture in output.pictures:
-        shutil.copyfile(picture, out / picture.name)
+        copy_picture(picture, out / picture.name)
     if output.plates:
         report.write_plate_records(out, output.plates)
     write_run_charts(out, results.rows, output.plates, output.bound_curves)

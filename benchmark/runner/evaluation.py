@@ -1,8 +1,10 @@
 """Attack one lens: restore with every restorer, read with every reader on the sensor image and on
 each restorer's output, and score everything the same way.
 
-An attacker that raises, or returns the wrong shape, dtype, range or non-finite values, gives a
-failed row (attacker, stage, message) and never a metric; the other attackers' rows are complete.
+An attacker that raises (anything but Ctrl-C: `benchmark.runner.isolation.attempt`), or returns the
+wrong shape, dtype, range or non-finite values, gives a failed row (attacker, stage, message) and
+never a metric; the other attackers' rows are complete. Every attacker is handed its own copies of
+its inputs (`isolation.private`, `isolation.own_context`), so none can change another's score.
 """
 
 from __future__ import annotations
@@ -14,13 +16,12 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TypeVar
 
 import torch
 from tqdm.auto import tqdm
 
 import attacks
-from benchmark.runner.budget import time_budget
+from benchmark.runner.isolation import attempt, describe, own_context, private
 from benchmark.runner.intervals import plate_intervals, scene_intervals
 from benchmark.results.metrics import psnr, ssim
 from benchmark.runner.diagnostics.native_memory import release_free_memory
@@ -32,7 +33,6 @@ from benchmark.results.schema import Row, RowError, chain_name
 from benchmark.runner.sensing import batches
 
 log = logging.getLogger(__name__)
-T = TypeVar("T")
 
 # How far outside [0, 1] a restored image may stray (float rounding of a clamp-free network).
 RANGE_TOLERANCE = 1e-4
@@ -40,17 +40,6 @@ RANGE_TOLERANCE = 1e-4
 
 class OutputError(ValueError):
     """An attacker returned something other than what its contract promises."""
-
-
-def attempt(attacker: str, stage: str, work: Callable[[], T], budget_s: float | None = None) -> T | RowError:
-    """Run `work` within `budget_s` seconds (None: no limit); any exception, or running out of
-    time, becomes the RowError of `attacker` at `stage` (and is logged)."""
-    try:
-        with time_budget(budget_s, f"{attacker} ({stage})"):
-            return work()
-    except Exception as exc:  # noqa: BLE001 - a broken plugin must not take the run down
-        log.warning("attacker %r failed at %s: %s: %s", attacker, stage, type(exc).__name__, exc)
-        return RowError(attacker, stage, f"{type(exc).__name__}: {exc}")
 
 
 def check_restored(name: str, out: object, sensor: torch.Tensor) -> torch.Tensor:
@@ -68,6 +57,7 @@ def check_restored(name: str, out: object, sensor: torch.Tensor) -> torch.Tensor
         raise OutputError(f"{name}.restore returned {bad} non-finite value(s) (NaN/inf)")
     if low < -RANGE_TOLERANCE or high > 1 + RANGE_TOLERANCE:
         raise OutputError(f"{name}.restore returned values in [{low:.4g}, {high:.4g}]; expected [0, 1]")
+    # clamp makes a new tensor: what is kept is out of reach of the attacker that returned `out`.
     return out.float().clamp(0, 1)
 
 
@@ -104,7 +94,7 @@ def restore_all(attacker: attacks.Restorer, sensor: torch.Tensor, batch_size: in
     outs = []
     with torch.no_grad():
         for b in batches(sensor, frames_per_batch(sensor, batch_size)):
-            outs.append(check_restored(attacker.name, attacker.restore(b.to(device)), b.to(device)).cpu())
+            outs.append(check_restored(attacker.name, attacker.restore(private(b, device)), b).cpu())
     return torch.cat(outs)
 
 
@@ -134,7 +124,7 @@ def restore_windows(attacker: attacks.Restorer, windows: Sequence[torch.Tensor],
     outs: list[torch.Tensor] = []
     with torch.no_grad():
         for _, b in shape_batches(windows, batch_size, RESTORE_PIXELS_PER_BATCH):
-            outs.extend(check_restored(attacker.name, attacker.restore(b.to(device)), b.to(device)).cpu())
+            outs.extend(check_restored(attacker.name, attacker.restore(private(b, device)), b).cpu())
     return outs
 
 
@@ -179,7 +169,7 @@ def read_plates(reader: attacks.Reader, images: torch.Tensor | Sequence[torch.Te
         for start, batch in shape_batches(images, batch_size):
             chunk = scenes[start:start + batch.shape[0]]
             chunks.append(chunk)
-            yield batch.to(device), attacks.ReadHints(
+            yield private(batch, device), attacks.ReadHints(
                 vehicle_boxes=[[v.box_xyxy for v in s.vehicles] for s in chunk], segment=segment,
                 plate_boxes=[[p.box_xyxy for p in s.plates] for s in chunk])
 
@@ -280,7 +270,11 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
     """One restorer of ``run_restorers``: restore, score, read with each reader."""
     # A reference (e.g. the uncorrected image) is reported, but never as an attack.
     kind = "reference" if getattr(attacker, "reference", False) else "restorer"
-    settings = {"restorer": attacker.describe()}
+    described = describe(attacker)
+    if isinstance(described, RowError):
+        out.rows.append(rows.failed(kind, attacker.name, described, restorer=attacker.name))
+        return
+    settings = {"restorer": described}
     meta = fitted.get(attacker.name, {})
     if "skipped" in meta:
         log.info("%s on %s skipped: %s", attacker.name, target.lens_name, meta["skipped"])
@@ -290,7 +284,8 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
                                     settings=settings))
         return
     t0 = time.perf_counter()
-    error = attempt(attacker.name, "fit", lambda: attacker.fit(target.ctx), cfg.budget_s)  # normally a cache hit
+    ctx = own_context(target.ctx)
+    error = attempt(attacker.name, "fit", lambda: attacker.fit(ctx), cfg.budget_s)  # normally a cache hit
     fit_s = meta.get("fit_s", time.perf_counter() - t0)  # fitted here when its task's result was not kept
     t0 = time.perf_counter()
     restored = error if isinstance(error, RowError) else attempt(
@@ -319,7 +314,7 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
             return
         images = windows
     out.restored[attacker.name] = restored
-    out.described[attacker.name] = attacker.describe()
+    out.described[attacker.name] = described
     out.threat_models[attacker.name] = attacker.threat_model
     if kind == "reference":
         out.references.add(attacker.name)
@@ -332,7 +327,7 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
     del images
     metrics.update({"fit_s": float(fit_s), "images_per_s": target.sharp.shape[0] / run_s})
     row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
-                   threat_model=attacker.threat_model.value, settings={"restorer": attacker.describe()})
+                   threat_model=attacker.threat_model.value, settings=settings)
     scene_intervals(row, per_image, seed=row.seed)
     row.set_units(scene_units(target.scenes, per_image))
     out.rows.append(row)
@@ -349,23 +344,30 @@ def resident_gb() -> float:
 
 @dataclass
 class ReadyReader:
-    """A reader after its fit: `fit_error` is the fit's RowError (every chain of it is then a
-    failed row), None when it fitted."""
+    """A reader after its fit: `fit_error` is the RowError of its describe(), skip_reason() or fit
+    (every chain of it is then a failed row), None when it fitted; `described` its describe()."""
 
     reader: attacks.Reader
     fit_error: RowError | None
+    described: dict = field(default_factory=dict)
 
 
 def fit_readers(target: Target, readers: Sequence[attacks.Reader], cfg: RunConfig) -> list[ReadyReader]:
-    """Fit each reader that does not skip this target (a skip is logged)."""
+    """Fit each reader that does not skip this target (a skip is logged), each on its own context."""
     ready = []
     for reader in readers:
-        reason = reader.skip_reason(target.ctx)
-        if reason:
+        described = describe(reader)
+        if isinstance(described, RowError):
+            ready.append(ReadyReader(reader, described))
+            continue
+        ctx = own_context(target.ctx)
+        reason = attempt(reader.name, "fit", lambda: reader.skip_reason(ctx))
+        if reason and not isinstance(reason, RowError):
             log.info("%s on %s skipped: %s", reader.name, target.lens_name, reason)
             continue
-        error = attempt(reader.name, "fit", lambda: reader.fit(target.ctx), cfg.budget_s)
-        ready.append(ReadyReader(reader, error if isinstance(error, RowError) else None))
+        error = reason if isinstance(reason, RowError) else attempt(reader.name, "fit", lambda: reader.fit(ctx),
+                                                                     cfg.budget_s)
+        ready.append(ReadyReader(reader, error if isinstance(error, RowError) else None, described))
     return ready
 
 
@@ -376,7 +378,7 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
     reader = ready.reader
     chain = reader.name if restorer is None else chain_name(restorer, reader.name)
     kind = "reader" if restorer is None else "reference" if restorer in out.references else "chain"
-    settings = {"reader": reader.describe(), **({"restorer": out.described[restorer]} if restorer else {})}
+    settings = {"reader": ready.described, **({"restorer": out.described[restorer]} if restorer else {})}
     chain_rows = out.reader_rows.setdefault(reader.name, [])
     if ready.fit_error is not None:
         chain_rows.append(rows.failed(kind, chain, ready.fit_error, restorer=restorer, reader=reader.name,
@@ -386,6 +388,12 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
     # restored images with the clean one.
     segment = target.segment_sensor if restorer is None else target.segment_restored
     plate_scenes = target.scenes if target.plates is None else target.plates.scenes
+    if not any(s.plates for s in plate_scenes):  # e.g. --scenes photos: a sentence, not a ZeroDivisionError
+        error = RowError(reader.name, "read", f"the scenes {cfg.scenes!r} hold no licence plates, so the plate "
+                         f"reader {reader.name!r} has nothing to read; read plates on synthetic scenes or on "
+                         "cityscapes:PATH with plate annotations")
+        chain_rows.append(rows.failed(kind, chain, error, restorer=restorer, reader=reader.name, settings=settings))
+        return
     result = attempt(reader.name, "read", lambda: read_plates(reader, images, plate_scenes, cfg.profile.batch_size,
                                                                cfg.device, segment), cfg.budget_s)
     if isinstance(result, RowError):

@@ -7,6 +7,7 @@ grid gives the same rows on either. Ray is an optional extra (`pip install ".[ra
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol
 
@@ -21,18 +22,26 @@ from benchmark.runner.tasks import TaskResult, execute
 log = logging.getLogger(__name__)
 
 
+# Called with each task and its result as soon as it completes (the runner writes the rows so far).
+OnResult = Callable[[Task, TaskResult], None]
+
+
 class Executor(Protocol):
-    def run(self, tasks: list[Task], cfg: RunConfig, directory: Path) -> dict[str, TaskResult]: ...
+    def run(self, tasks: list[Task], cfg: RunConfig, directory: Path,
+            on_result: OnResult | None = None) -> dict[str, TaskResult]: ...
 
 
 class LocalExecutor:
     """Tasks in plan order, in this process, which hands the memory each task freed back to the
     system before the next starts (``native_memory.release_free_memory``)."""
 
-    def run(self, tasks: list[Task], cfg: RunConfig, directory: Path) -> dict[str, TaskResult]:
+    def run(self, tasks: list[Task], cfg: RunConfig, directory: Path,
+            on_result: OnResult | None = None) -> dict[str, TaskResult]:
         results = {}
         for task in tqdm(tasks, desc="tasks", unit="task"):
             results[task.key] = execute(task, cfg, directory)
+            if on_result is not None:
+                on_result(task, results[task.key])
             release_free_memory()
         return results
 
@@ -62,7 +71,8 @@ class RayExecutor:
         self.address = address
         self.max_retries = max_retries
 
-    def run(self, tasks: list[Task], cfg: RunConfig, directory: Path) -> dict[str, TaskResult]:
+    def run(self, tasks: list[Task], cfg: RunConfig, directory: Path,
+            on_result: OnResult | None = None) -> dict[str, TaskResult]:
         ray = self.ray
         started_here = not ray.is_initialized()
         if started_here:
@@ -81,10 +91,14 @@ class RayExecutor:
                                                 max_retries=self.max_retries, retry_exceptions=False
                                                 ).remote(task, cfg, directory, threads, *deps)
             pending = list(refs.values())
+            task_of = {ref: task for task, ref in zip(tasks, refs.values())}  # ObjectRefs hash by their id
             with tqdm(total=len(pending), desc="tasks (ray)", unit="task") as bar:
                 while pending:
                     done, pending = ray.wait(pending, num_returns=1)
-                    ray.get(done)  # surfaces a failed task at once
+                    finished = ray.get(done)  # surfaces a failed task at once
+                    if on_result is not None:
+                        for ref, result in zip(done, finished):
+                            on_result(task_of[ref], result)
                     bar.update(len(done))
             return {key: ray.get(ref) for key, ref in refs.items()}
         finally:

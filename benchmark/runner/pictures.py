@@ -4,7 +4,6 @@ reader's plate gallery and, for a co-designed lens, its training curves, written
 from __future__ import annotations
 
 import logging
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +13,7 @@ import lenses
 from benchmark.results.charts.plate_gallery import write_plate_gallery
 from benchmark.runner.evaluation import Attacked, Target, gallery_windows
 from benchmark.results.plate_scoring import readable
-from benchmark.store.cache import config_hash
+from benchmark.store.cache import atomic_write_bytes, config_hash, read_verified
 from benchmark.results.charts.samples import write_sample_grid
 from benchmark.results.schema import chain_name
 
@@ -78,6 +77,21 @@ def training_curves(lens: lenses.Lens, seed: int, cache_dir: Path, folder: Path)
     if not source.is_file():
         log.warning("co-design curves of %s not found at %s; the run folder goes without them", lens.name, source)
         return None
+    data = read_verified(source)  # a truncated or altered chart is reported and removed, not copied
+    if data is None:
+        log.warning("co-design curves of %s at %s are missing or corrupt; the run folder goes without them",
+                    lens.name, source)
+        return None
     name = f"curves_{lens.name}_seed{seed}.png".replace("/", "_")
-    shutil.copyfile(source, Path(folder) / name)
+    atomic_write_bytes(Path(folder) / name, data)
     return name
+
+
+def copy_picture(source: Path, dest: Path) -> None:
+    """Copy a task's picture (sealed when its task wrote it) to `dest` atomically, after checking it
+    against its checksum: a truncated file is never copied, and a full disk leaves no partial one."""
+    data = read_verified(source)
+    if data is None:
+        raise RuntimeError(f"picture {source} is missing or does not match its checksum (removed); run again "
+                           "to rebuild its task")
+    atomic_write_bytes(dest, data)

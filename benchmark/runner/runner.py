@@ -18,10 +18,12 @@ from pathlib import Path
 
 import attacks
 from benchmark.runner import executors
-from benchmark.runner.planning import AttackerRef, plan, run_directory
+from benchmark.runner.planning import AttackerRef, Task, plan, run_directory
+from benchmark.runner.tasks import TaskResult
 from benchmark.store.provenance import provenance
 from benchmark.runner.config import RunConfig
-from benchmark.results.schema import Row, RowError, settings_hash
+from benchmark.results.schema import Results as ResultsFile
+from benchmark.results.schema import Row, RowError, settings_hash, write_results
 
 log = logging.getLogger(__name__)
 
@@ -84,16 +86,36 @@ def load_failure_rows(cfg: RunConfig, failures: list[attacks.PluginFailure]) -> 
     return rows, settings
 
 
-def run(cfg: RunConfig, executor: str = "local", selection: Selection | None = None) -> RunOutput:
+def run(cfg: RunConfig, executor: str = "local", selection: Selection | None = None,
+        partial: Path | None = None) -> RunOutput:
     """Plan the run's tasks, execute them (locally or on Ray), and collect rows in plan order.
 
-    `selection` is `select_attackers(cfg.attacks)` when the caller has checked it already."""
+    `selection` is `select_attackers(cfg.attacks)` when the caller has checked it already. With
+    `partial`, the rows of every task completed so far are rewritten there (a results file, meta
+    "partial": true) as each task completes, so a run that dies leaves them on disk; the task
+    results themselves stay in the cache, and a rerun resumes from them."""
     selection = selection or select_attackers(cfg.attacks)
     planned = plan(cfg, selection.restorers, selection.readers)
     directory = run_directory(cfg, selection.restorers, selection.readers)
-    results = executors.get(executor).run(planned, cfg, directory)
-    rows, settings = load_failure_rows(cfg, selection.failures)
-    out = RunOutput(rows, settings, [], [], {}, {})
+    failures = load_failure_rows(cfg, selection.failures)
+    done: dict[str, TaskResult] = {}
+
+    def write_partial(task: Task, result: TaskResult) -> None:
+        done[task.key] = result
+        so_far = collect([t for t in planned if t.key in done], done, directory, failures)
+        write_results(partial, ResultsFile(so_far.rows, so_far.settings, {  # type: ignore[arg-type]
+            "partial": True, "tasks_done": len(done), "tasks_total": len(planned),
+            "task_results": str(directory)}))
+
+    results = executors.get(executor).run(planned, cfg, directory, write_partial if partial is not None else None)
+    return collect(planned, results, directory, failures)
+
+
+def collect(planned: list[Task], results: dict[str, TaskResult], directory: Path,
+            failures: tuple[list[Row], dict[str, dict]]) -> RunOutput:
+    """The run's output from the results of `planned` (in plan order), after the rows of the
+    attackers that did not load (`failures`, from `load_failure_rows`)."""
+    out = RunOutput(list(failures[0]), dict(failures[1]), [], [], {}, {})
     for task in planned:
         result = results[task.key]
         out.rows.extend(result.rows)

@@ -29,7 +29,8 @@ from benchmark.runner.diagnostics import profiling
 from benchmark.runner import task_costs
 from benchmark.runner.attacker_objects import load as load_attacker
 from benchmark.runner.budget import BudgetExceeded, time_budget
-from benchmark.store.cache import CHECKSUM_SUFFIX, ArtifactCache, discard, exclusive, read_verified, write_verified
+from benchmark.store.cache import (CHECKSUM_SUFFIX, ArtifactCache, discard, exclusive, read_verified, seal,
+                                   write_verified)
 from benchmark.codesign.trainer import TRAINER_VERSION
 from benchmark.runner.evaluation import Attacked, PlateSet, Target, attempt, fit_readers, read_sensor, run_reader, run_restorers
 from benchmark.runner.intervals import utility_intervals
@@ -88,11 +89,18 @@ def load_result(directory: Path, task: Task) -> TaskResult | None:
     if data is None:
         return None
     try:
-        return TaskResult.from_json(json.loads(data))
+        result = TaskResult.from_json(json.loads(data))
     except (ValueError, KeyError, TypeError) as exc:  # verified bytes of an older layout
         log.warning("unreadable task result %s (%s); it will be recomputed", path, exc)
         discard(path)
         return None
+    # Its pictures are checked like the result: a truncated or altered one (reported and removed by
+    # read_verified) would otherwise be copied into the run and published.
+    if any(read_verified(path.parent / name) is None for name in result.meta.get("pictures", [])):
+        log.warning("task result %s lost a picture; it will be recomputed", path)
+        discard(path)
+        return None
+    return result
 
 
 def is_cached(directory: Path, task: Task) -> bool:
@@ -108,17 +116,30 @@ def is_cached(directory: Path, task: Task) -> bool:
     if hashlib.sha256(data).hexdigest() != expected:
         return False
     try:
-        return not TaskResult.from_json(json.loads(data)).has_failures
+        result = TaskResult.from_json(json.loads(data))
     except (ValueError, KeyError, TypeError):  # verified bytes of an older layout
         return False
+    return not result.has_failures and all(_intact(path.parent / name) for name in result.meta.get("pictures", []))
+
+
+def _intact(path: Path) -> bool:
+    """Whether `path` matches its checksum sidecar (read-only)."""
+    try:
+        data = path.read_bytes()
+        expected = path.with_name(path.name + CHECKSUM_SUFFIX).read_text().strip()
+    except FileNotFoundError:
+        return False
+    return hashlib.sha256(data).hexdigest() == expected
 
 
 def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
     """Run one task unless its result exists; publish the result folder in one rename.
 
     The per-task lock lets one run compute while others sharing the cache wait and read its
-    result; staging folders are removed only under that lock, i.e. only when their owner is gone.
-    A stored result with failures is computed again.
+    result; staging folders are removed only under that lock, i.e. only when their owner is gone,
+    or by the task itself when it fails. A stored result with failures is computed again. A
+    lens's task that raises gives failed rows (`failed_result`) instead of ending the run, so the
+    other lenses' results are complete.
     """
     done = load_result(directory, task)
     if done is not None and not done.has_failures:
@@ -133,9 +154,22 @@ def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
         staging = directory / f".{task.key}.staging-{os.getpid()}-{time.monotonic_ns()}"
         staging.mkdir(parents=True)
         t0 = time.perf_counter()
-        with profiling.task_scope(task):  # a no-op unless the run is profiled (--profile-time)
-            result = _KINDS[task.kind](task, cfg, staging)
+        try:
+            with profiling.task_scope(task):  # a no-op unless the run is profiled (--profile-time)
+                result = _KINDS[task.kind](task, cfg, staging)
+        except Exception as exc:
+            shutil.rmtree(staging)
+            failed = failed_result(task, cfg, exc)
+            if failed is None:
+                raise
+            staging.mkdir()
+            result = failed
+        except BaseException:
+            shutil.rmtree(staging)
+            raise
         wall_s = time.perf_counter() - t0
+        for name in result.meta.get("pictures", []):
+            seal(staging / name)  # checked with the result when it is reused (load_result)
         for row in result.rows:
             row.provenance["wall_s"] = wall_s
         task_costs.record(staging, task, cfg, wall_s)  # what a dry run's estimates are made of
@@ -148,6 +182,27 @@ def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
     if loaded is None:
         raise RuntimeError(f"task {task.key}: its result {directory / task.key / RESULT_FILE} vanished after writing")
     return loaded
+
+
+def failed_result(task: Task, cfg: RunConfig, exc: Exception) -> TaskResult | None:
+    """The result of a lens's task that raised: a failed row per row it would have made (the fit of
+    a restorer records the error for its evaluate task); None for a per-seed task, whose failure
+    every lens shares (it ends the run). The traceback goes to the log."""
+    if not task.lens:
+        return None
+    log.error("task %s failed", task.key, exc_info=exc)
+    message = f"{type(exc).__name__}: {exc} (task {task.key}; traceback in the log)"
+    builder = _builder(cfg, task.lens, task.seed, None)
+    if task.kind == "fit":
+        return TaskResult(meta={"error": RowError(task.restorers[0].name, "fit", message).to_json()})
+    if task.kind in ("lens", "utility", "bound"):
+        return TaskResult([builder.failed(task.kind, task.kind, RowError(task.kind, "measure", message))],
+                          builder.settings)
+    rows = [builder.failed("restorer", r.name, RowError(r.name, "measure", message), restorer=r.name)
+            for r in task.restorers]
+    rows += [builder.failed("reader", r.name, RowError(r.name, "measure", message), reader=r.name)
+             for r in task.readers]
+    return TaskResult(rows, builder.settings)
 
 
 # ---- helpers of the task bodies ----------------------------------------------------------------
@@ -262,9 +317,8 @@ def _sharp(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
                     plates=plate_set(cfg, task.seed, None))
     readers, failed = _load_attackers(task.readers, attacks.Reader, builder)
     out = Attacked(rows=rows + failed)
-    for reader in readers:
-        if reader.skip_reason(target.ctx) is None:
-            run_reader(target, reader, cfg, builder, out)
+    for reader in readers:  # a reader that skips the sharp scenes is left out by run_reader
+        run_reader(target, reader, cfg, builder, out)
     return TaskResult(out.rows, builder.settings, out.plates)
 
 
@@ -334,7 +388,9 @@ def _fit(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     if isinstance(attacker, RowError):
         return TaskResult(meta={"error": attacker.to_json()})
     ctx = fit_context(_lens(cfg, task.lens, task.seed), cfg, task.seed, None)
-    reason = attacker.skip_reason(ctx)
+    reason = attempt(ref.name, "fit", lambda: attacker.skip_reason(ctx))
+    if isinstance(reason, RowError):
+        return TaskResult(meta={"error": reason.to_json()})
     if reason:
         return TaskResult(meta={"skipped": reason})
     t0 = time.perf_counter()

@@ -10,10 +10,13 @@ chart module offers a ``*_figure`` function that returns the figure (for tests a
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 from typing import Any
 
 from matplotlib.figure import Figure
+
+from benchmark.store.cache import atomic_write_bytes
 
 # No matplotlib version stamp in the PNGs: the same data render to byte-identical files.
 PNG_METADATA: dict[str, Any] = {"Software": None}
@@ -35,5 +38,10 @@ def save_figure(fig: Figure, path: Path | str, dpi: int = 100, metadata: dict | 
         fig.tight_layout(rect=layout)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi, metadata={**PNG_METADATA, **(metadata or {})})
+    # Rendered in memory and written atomically: a full disk or a kill mid-write leaves the old chart
+    # or none, never a truncated one that would be published.
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format=path.suffix.lstrip(".") or "png", dpi=dpi,
+                metadata={**PNG_METADATA, **(metadata or {})})
+    atomic_write_bytes(path, buffer.getvalue())
     return path
