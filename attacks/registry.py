@@ -162,9 +162,9 @@ def load_all(names: list[str] | None = None) -> tuple[list[Attack], list[PluginF
             if isinstance(obj, type):
                 kind = "reader" if issubclass(obj, Reader) else "restorer" if issubclass(obj, Restorer) else None
             attacker = _checked_class(obj, origin, registered_name)()
-        except UnknownPluginError:
+        except (UnknownPluginError, KeyboardInterrupt):  # a typo by the caller; the user's own Ctrl-C
             raise
-        except Exception as exc:  # noqa: BLE001 - any plugin bug must not take the run down
+        except BaseException as exc:  # noqa: BLE001 - any plugin bug, a SystemExit too, must not take the run down
             failure = PluginFailure(spec, f"{type(exc).__name__}: {exc}", kind)
             logger.warning("attacker %r failed to load and is skipped: %s", spec, failure.error)
             failures.append(failure)

@@ -315,3 +315,9 @@ def test_a_chart_write_that_fails_leaves_no_partial_file(tmp_path, monkeypatch):
         save_figure(fig, tmp_path / "chart.png")
     assert list(tmp_path.iterdir()) == []
 
+
+
+def test_a_plugin_exiting_while_it_loads_is_a_load_failure(tmp_path):
+    (tmp_path / "exits.py").write_text("raise SystemExit(3)\n")
+    loaded, failures = attacks.load_all([f"{tmp_path / 'exits.py'}:Anything"])
+    assert loaded == [] and [f.error for f in failures] == ["SystemExit: 3"]
