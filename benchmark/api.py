@@ -193,6 +193,9 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
     """
     git_commit()  # pinned now, as the code was imported: later commits do not re-stamp this run
     silence_known_warnings()
+    _check_meta(meta)
+    if out is not None and not isinstance(out, (str, Path)):
+        raise TypeError(f"out must be a folder path (str or pathlib.Path) or None, got {type(out).__name__} {out!r}")
     cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames,
                                 budget_s)
     folder, created = prepare_out(Path(out)) if out is not None else (None, False)
@@ -218,6 +221,8 @@ def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike
                seeds: int | Sequence[int], scenes: str, device: str, executor: str, plate_format: str | None,
                frames: int, budget_s: float | None) -> tuple[RunConfig, runner.Selection]:
     """Check every argument (before any compute) and choose the attackers."""
+    _check_types(lens_names=lens_names, profile=profile, scenes=scenes, device=device, executor=executor,
+                 plate_format=plate_format)
     p = _profile(profile)
     names = [str(lens_names)] if isinstance(lens_names, (str, Path)) else [str(n) for n in lens_names]
     if not names:
@@ -229,14 +234,17 @@ def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike
         elif name not in known:
             lenses.load(name)
     load_scenes(scenes, "val", 0, p.image_size, 0)  # validates the scene set name
-    plate_format = plate_format or PLATE_FORMAT
+    plate_format = PLATE_FORMAT if plate_format is None else plate_format  # "" is an error, not the default
     plate_entropy_bits(plate_format)  # validates the format before any work
     if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
         raise ValueError(f"frames must be an integer >= 1, got {frames!r}")
     if budget_s is not None and (isinstance(budget_s, bool) or not isinstance(budget_s, (int, float))
                                  or not budget_s > 0):
         raise ValueError(f"budget_s must be None or a number of seconds > 0, got {budget_s!r}")
-    executors.get(executor)  # fails fast on a bad name or a missing Ray
+    try:
+        executors.get(executor)  # fails fast on a bad name or a missing Ray
+    except RuntimeError as exc:  # Ray not installed: say so as for any other bad argument
+        raise ValueError(f"executor {executor!r}: {exc}; or use executor 'local'") from None
     selection = select_attackers(requested, remote=executor != "local")
     cfg = RunConfig(lenses=names, attacks=[r.spec for r in selection.restorers + selection.readers],
                     scenes=scenes, profile=p, seeds=_seeds(seeds), device=check_device(device),
@@ -441,13 +449,57 @@ def _profile(profile: str | Profile) -> Profile:
     return profile if isinstance(profile, Profile) else get_profile(profile)
 
 
+# Seeds reach numpy's legacy generators and torch's, which take 0 .. 2**32 - 1 alike.
+MAX_SEED = 2**32 - 1
+
+
 def _seeds(seeds: int | Sequence[int]) -> list[int]:
+    if isinstance(seeds, (str, bytes)) or not isinstance(seeds, (int, Sequence)):
+        raise TypeError(f"seeds must be an integer or a sequence of integers like [0, 1, 2], got {seeds!r}")
     values = [seeds] if isinstance(seeds, int) else list(seeds)
     if not values or any(isinstance(s, bool) or not isinstance(s, int) for s in values):
         raise ValueError(f"seeds must be one or more integers like [0, 1, 2], got {seeds!r}")
+    bad = [s for s in values if not 0 <= s <= MAX_SEED]
+    if bad:
+        raise ValueError(f"seeds must lie in 0 .. {MAX_SEED} (2**32 - 1), got {bad[0]}")
     if len(set(values)) != len(values):
         raise ValueError(f"seeds lists a seed twice: {seeds!r}")
     return values
+
+
+def _check_types(**arguments: Any) -> None:
+    """TypeError naming the argument, what it got and what it takes, for a wrongly typed argument of
+    `run` / `plan` (their values are checked after)."""
+    optional = {"plate_format"}
+    for name, value in arguments.items():
+        if value is None and name in optional:
+            continue
+        if name == "lens_names":
+            items = [value] if isinstance(value, (str, Path)) else value
+            if not isinstance(items, (list, tuple)) or not all(isinstance(v, (str, Path)) for v in items):
+                raise TypeError(f"lenses must be a lens name or .toml path, or a list of them, got "
+                                f"{type(value).__name__} {value!r}")
+        elif name == "profile":
+            if not isinstance(value, (str, Profile)):
+                raise TypeError(f"profile must be a profile name (smoke, quick, paper) or a Profile, got "
+                                f"{type(value).__name__} {value!r}")
+        elif not isinstance(value, str):
+            raise TypeError(f"{name} must be a str{' or None' if name in optional else ''}, got "
+                            f"{type(value).__name__} {value!r}")
+
+
+def _check_meta(meta: Mapping[str, Any] | None) -> None:
+    """`meta` is stored in results.json: a mapping with str keys that JSON can write, checked before any compute."""
+    import json
+    if meta is None:
+        return
+    if not isinstance(meta, Mapping) or not all(isinstance(k, str) for k in meta):
+        raise TypeError(f"meta must be a mapping with str keys (stored in results.json) or None, got "
+                        f"{type(meta).__name__} {meta!r}")
+    try:
+        json.dumps(dict(meta))
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"meta must hold only what JSON can store (it goes into results.json): {exc}") from None
 
 
 def check_device(device: str) -> str:

@@ -1,20 +1,90 @@
-"""Command line: `python -m benchmark run ...` and `python -m benchmark list`."""
+"""Privacy Lens Bench: push scenes through candidate lenses, attack the sensor images, score
+utility against privacy."""
 
 from __future__ import annotations
 
 import argparse
 import contextlib
 import datetime as _dt
+import errno
 import logging
 import os
 import json
 import sys
 import time
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
-# Nothing downloads at run time: guard the libraries that might try.
-for _var in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE", "HF_DATASETS_OFFLINE"):
+# Nothing downloads, nothing phones home at run time: guard the libraries that might try
+# (ONNX Runtime's telemetry: see attacks/__init__.py).
+for _var in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE", "HF_DATASETS_OFFLINE", "ORT_DISABLE_TELEMETRY"):
     os.environ.setdefault(_var, "1")
+
+# Everything below imports torch (through lenses, attacks or the stages) only when a command needs it,
+# so that `--help` answers at once: tests/benchmark/test_cli_help.py checks that building the parser
+# imports no torch.
+EPILOG = """examples:
+  python -m benchmark list                                        lenses, attackers, scene sets
+  python -m benchmark run --lens ideal --profile smoke            a first look: about a minute
+  python -m benchmark run --lens gp --lens defocus --seeds 0,1    the quick profile, two seeds
+  python -m benchmark run --lens gp --dry-run                     the task plan, computing nothing
+  python -m benchmark run --lens ideal --attack wiener-known-psf --attack lpdr --out runs/first
+  python -m benchmark export-mask gp --format zemax-gridsag --out gp_mask.dat
+  python -m benchmark report                                      re-render leaderboard/
+
+`python -m benchmark COMMAND --help` for a command's options."""
+MASK_FORMATS = ("npy", "tiff", "zemax-gridsag", "csv")  # lenses.mask_export.FORMATS (a test keeps them equal)
+MAX_MASK_SAMPLES = 8193  # 8193^2 float64 = 0.5 GiB per grid; export-mask holds a few of them
+
+
+class _LazyChoices(Sequence[str]):
+    """Choices computed on first use, so that building the parser imports nothing heavy (argparse
+    reads them only to check a value or to print that command's help)."""
+
+    def __init__(self, compute: Callable[[], Sequence[str]]) -> None:
+        self._compute = compute
+        self._values: list[str] | None = None
+
+    def _get(self) -> list[str]:
+        if self._values is None:
+            self._values = list(self._compute())
+        return self._values
+
+    def __getitem__(self, index: Any) -> Any:
+        return self._get()[index]
+
+    def __len__(self) -> int:
+        return len(self._get())
+
+    def __contains__(self, value: object) -> bool:
+        return value in self._get()
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._get())
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose actions may carry ``lazy_help``: a callable that writes their help
+    when it is printed (e.g. the attackers that run by default, read from their classes)."""
+
+    def format_help(self) -> str:
+        for action in self._actions:
+            lazy = getattr(action, "lazy_help", None)
+            if lazy is not None:
+                action.help = lazy()
+        return super().format_help()
+
+
+def _profile_names() -> list[str]:
+    from benchmark.store.profiles import PROFILES
+    return list(PROFILES)
+
+
+PROFILE_CHOICES = _LazyChoices(_profile_names)
+
+
+MAX_SEED = 2**32 - 1  # benchmark.api.MAX_SEED: numpy's and torch's generators take 0 .. 2**32 - 1
 
 
 def _seeds(text: str) -> list[int]:
@@ -25,7 +95,30 @@ def _seeds(text: str) -> list[int]:
         raise argparse.ArgumentTypeError(f"--seeds must be comma-separated integers like 0,1,2, got {text!r}") from None
     if len(set(seeds)) != len(seeds):
         raise argparse.ArgumentTypeError(f"--seeds lists a seed twice: {text!r}")
+    bad = [s for s in seeds if not 0 <= s <= MAX_SEED]
+    if bad:
+        raise argparse.ArgumentTypeError(f"--seeds must lie in 0 .. {MAX_SEED} (2**32 - 1), got {bad[0]}")
     return seeds
+
+
+def _samples(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--samples must be an integer, got {text!r}") from None
+    if not 5 <= n <= MAX_MASK_SAMPLES:
+        gib = n * n * 8 / 2**30
+        raise argparse.ArgumentTypeError(
+            f"--samples must lie in 5 .. {MAX_MASK_SAMPLES} grid nodes per side, got {n} "
+            f"({gib:.1f} GiB per {n} x {n} float64 grid)")
+    return n
+
+
+def _plate_format(text: str) -> str:
+    if not text or set(text) - {"L", "D"}:
+        raise argparse.ArgumentTypeError(f"--plate-format takes L (letter) and D (digit) only, like LLDDDDD, "
+                                         f"got {text!r}")
+    return text
 
 
 def _budget(text: str) -> float:
@@ -47,9 +140,8 @@ def _device(text: str) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from benchmark.store.profiles import PROFILES
-    from lenses.mask_export import FORMATS as MASK_FORMATS
-    parser = argparse.ArgumentParser(prog="python -m benchmark", description=__doc__)
+    parser = _Parser(prog="python -m benchmark", description=__doc__, epilog=EPILOG,
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
     loudness = parser.add_mutually_exclusive_group()
     loudness.add_argument("-v", "--verbose", action="store_true", help="log debug messages too")
     loudness.add_argument("-q", "--quiet", action="store_true", help="log warnings and errors only")
@@ -57,10 +149,12 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="push scenes through lenses, attack the sensor images, write a table")
     run.add_argument("--lens", action="append", required=True, metavar="NAME|SPEC.toml",
                      help="lens to benchmark (repeatable): a registered name or a .toml spec path")
-    run.add_argument("--attack", action="append", default=None, metavar="NAME|FILE.py:Class",
-                     help="attacker to run (repeatable); default: every registered attacker")
+    attack = run.add_argument("--attack", action="append", default=None, metavar="NAME|FILE.py:Class",
+                              help="attacker to run (repeatable); default: the attackers registered to run by default")
+    attack.lazy_help = _attack_help  # type: ignore[attr-defined]
     run.add_argument("--scenes", default="synthetic", help="synthetic (default), photos, or cityscapes:PATH")
-    run.add_argument("--profile", default="quick", choices=list(PROFILES), help="run size (default: quick)")
+    run.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
+                     help="run size: %(choices)s (default: quick)")
     run.add_argument("--seeds", type=_seeds, default=[0], help="comma-separated seeds, e.g. 0,1,2 (default 0)")
     run.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
     run.add_argument("--out", type=Path, default=None, help="output folder (default runs/<date-time>)")
@@ -68,11 +162,13 @@ def build_parser() -> argparse.ArgumentParser:
                      help="where tasks run: here (default), a local Ray instance, or a Ray cluster")
     run.add_argument("--publish", action="store_true",
                      help="also write one leaderboard entry per lens to leaderboard/entries/ and re-render it")
-    run.add_argument("--plate-format", default=None, metavar="FORMAT",
+    run.add_argument("--plate-format", type=_plate_format, default=None, metavar="FORMAT",
                      help="plate strings the privacy bound counts: L = letter, D = digit (default: the scene generator's)")
     run.add_argument("--budget-s", type=_budget, default=None, metavar="SECONDS",
                      help="wall-time budget of each expensive step (an attacker's fit, restore or read; the bound): "
-                          "a step past it gives a failed row with a clear message (default: none)")
+                          "a step past it gives a failed row with a clear message (default: none). It is checked "
+                          "between Python operations (a signal), so one long native call (a big convolution, an "
+                          "ONNX Runtime run) finishes first: a step can overrun it by that call's length")
     run.add_argument("--frames", type=int, default=30, metavar="T",
                      help="frames of a static plate for the video bound (default 30; T = 1 is always reported)")
     run.add_argument("--dry-run", action="store_true",
@@ -83,13 +179,15 @@ def build_parser() -> argparse.ArgumentParser:
                      help="with --profile-time, also trace Python/NumPy allocations (tracemalloc: Python-heavy code "
                           "such as a co-design step runs ~1.3x slower)")
     train = sub.add_parser("train", help="train (or load) a co-designed lens; under torchrun, data-parallel over the ranks")
-    train.add_argument("--lens", required=True, choices=_codesign_lenses(), help="co-design scheme registered as a lens")
-    train.add_argument("--profile", default="quick", choices=list(PROFILES), help="run size (default: quick)")
+    train.add_argument("--lens", required=True, choices=CODESIGN_CHOICES, metavar="LENS", help="co-design scheme registered as a lens: %(choices)s")
+    train.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
+                     help="run size: %(choices)s (default: quick)")
     train.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     train.add_argument("--device", type=_device, default="cpu",
                        help="cpu (default; gloo under torchrun) or cuda (NCCL under torchrun, one GPU per rank)")
     pre = sub.add_parser("pretrain", help="pre-train the clean utility net to its plateau; export weights + provenance")
-    pre.add_argument("--profile", default="quick", choices=list(PROFILES), help="recipe and val set (default: quick)")
+    pre.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
+                     help="recipe and val set: %(choices)s (default: quick)")
     pre.add_argument("--seed", type=int, default=0, help="training seed, and the seed of the val scenes (default 0)")
     pre.add_argument("--out", type=Path, default=None,
                      help="weights folder (default: the package's benchmark/codesign/utility/weights)")
@@ -99,18 +197,23 @@ def build_parser() -> argparse.ArgumentParser:
     ship = sub.add_parser("pretrain-attacker", help="train (or load from the cache) a lens-independent attacker "
                                                     "and ship its weights in the package with their provenance")
     ship.add_argument("attacker", choices=["nafnet-generic"], help="the lens-independent attacker")
-    ship.add_argument("--profile", default="quick", choices=list(PROFILES), help="budget (default: quick)")
+    ship.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
+                     help="budget: %(choices)s (default: quick)")
     ship.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     ship.add_argument("--out", type=Path, default=None, help="weights folder (default: the package's attacks/weights)")
     lens_ship = sub.add_parser("ship-lens", help="co-design (or load from the cache) a lens and ship it, with its "
                                                  "known-pairs NAFNet, in the package with their provenance")
-    lens_ship.add_argument("lens", choices=_codesign_lenses(), help="co-design scheme registered as a lens")
-    lens_ship.add_argument("--profile", default="quick", choices=list(PROFILES), help="run size (default: quick)")
+    lens_ship.add_argument("lens", choices=CODESIGN_CHOICES, metavar="LENS",
+                           help="co-design scheme registered as a lens: %(choices)s")
+    lens_ship.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
+                     help="run size: %(choices)s (default: quick)")
     lens_ship.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     lens_ship.add_argument("--out", type=Path, default=None,
                            help="folder to write into instead of the package (the lens there, the attacker's "
                                 "weights in OUT/attack_weights)")
-    sub.add_parser("list", help="list registered lenses, attackers and scene sets")
+    listing = sub.add_parser("list", help="list lenses and attackers (what each is, its threat model, whether it runs "
+                                          "by default) and scene sets")
+    listing.add_argument("--json", action="store_true", help="print one JSON object, for scripts")
     rep = sub.add_parser("report", help="render leaderboard/README.md and charts from leaderboard/entries/")
     rep.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
     rep.add_argument("--migrate", action="store_true",
@@ -126,15 +229,17 @@ def build_parser() -> argparse.ArgumentParser:
                       help="npy (float64), tiff (32-bit float), zemax-gridsag (OpticStudio Grid Sag .DAT, mm), "
                            "csv (x_mm, y_mm, height_um); metadata in PATH.json beside it")
     mask.add_argument("--out", type=Path, required=True, metavar="PATH", help="file to write")
-    mask.add_argument("--samples", type=int, default=257, help="grid nodes per side across the aperture (default 257)")
-    mask.add_argument("--profile", default="quick", choices=list(PROFILES),
-                      help="a co-designed lens's training profile (default: quick)")
+    mask.add_argument("--samples", type=_samples, default=257,
+                      help=f"grid nodes per side across the aperture, 5 .. {MAX_MASK_SAMPLES} (default 257)")
+    mask.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
+                      help="a co-designed lens's training profile: %(choices)s (default: quick)")
     mask.add_argument("--seed", type=int, default=0, help="a co-designed lens's training seed (default 0)")
     study = sub.add_parser("study", help="measure a modelling-choice study into leaderboard/studies/ and re-render")
     study.add_argument("name", choices=["psf-grid", "utility-size"],
                        help="psf-grid: PSF support, pupil grid, oversampling vs error and time; "
                             "utility-size: SegFormer variants, each trained to its plateau, vs mIoU")
-    study.add_argument("--profile", default="quick", choices=list(PROFILES), help="utility-size's budget (default: quick)")
+    study.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
+                     help="utility-size's budget: %(choices)s (default: quick)")
     study.add_argument("--variants", default=None, metavar="V1,V2,...",
                        help="utility-size's SegFormer variants, smallest first, the suite's last (default: "
                             "tiny,b0-narrow,b0); MODEL@PX trains MODEL on PX x PX crops, e.g. tiny@256")
@@ -145,6 +250,68 @@ def build_parser() -> argparse.ArgumentParser:
 def _codesign_lenses() -> list[str]:
     from benchmark.codesign.schemes import SCHEMES
     return [name for name, scheme in SCHEMES.items() if scheme.optics]  # "fixed" is no registered lens
+
+
+CODESIGN_CHOICES = _LazyChoices(_codesign_lenses)
+
+
+def _attack_help() -> str:
+    """`run --attack`'s help, with the attackers that run by default read from their classes."""
+    rows = attacker_catalogue()
+    default = [r["name"] for r in rows if r["runs_by_default"]]
+    named = [r["name"] for r in rows if not r["runs_by_default"]]
+    text = ("attacker to run (repeatable): a registered name or FILE.py:Class; default: "
+            + (", ".join(default) if default else "none"))
+    if named:
+        text += "; run only when named: " + ", ".join(named)
+    return text.replace("%", "%%")
+
+
+def _first_line(text: str | None) -> str:
+    """A docstring's first paragraph on one line (its summary)."""
+    paragraph = (text or "").strip().split("\n\n")[0]
+    return " ".join(paragraph.split())
+
+
+def attacker_catalogue() -> list[dict[str, Any]]:
+    """Every registered attacker: name, kind (restorer/reader), threat model, whether it runs by
+    default, a one-line description and where it comes from; one that fails to import says why."""
+    import attacks
+    from attacks.registry import ATTACKS_GROUP
+    from lenses.registry import discover
+    rows = []
+    for name, entry in sorted(discover(ATTACKS_GROUP).items()):
+        row: dict[str, Any] = {"name": name, "source": entry.value}
+        try:
+            cls = entry.load()
+            row.update(kind="reader" if issubclass(cls, attacks.Reader) else "restorer",
+                       threat_model=cls.threat_model.value, runs_by_default=bool(cls.run_by_default),
+                       reference=bool(getattr(cls, "reference", False)), description=_first_line(cls.__doc__))
+        except Exception as exc:  # noqa: BLE001 - a broken plugin is listed, not fatal
+            row.update(kind=None, threat_model=None, runs_by_default=False, reference=False,
+                       description=f"fails to load: {type(exc).__name__}: {exc}")
+        rows.append(row)
+    return rows
+
+
+def lens_catalogue() -> list[dict[str, Any]]:
+    """Every registered lens: name, whether it is co-designed (trained per profile and seed) or
+    fixed, a one-line description and where it comes from. Lenses run only when named (--lens)."""
+    import lenses
+    from benchmark.codesign.schemes import SCHEMES
+    from lenses.registry import discover
+    rows = []
+    for name, entry in sorted(discover(lenses.GROUP).items()):
+        scheme = SCHEMES.get(name)
+        try:
+            description = _first_line(entry.load().__doc__)
+        except Exception as exc:  # noqa: BLE001 - a broken plugin is listed, not fatal
+            description = f"fails to load: {type(exc).__name__}: {exc}"
+        if scheme is not None and entry.value.startswith("benchmark.codesign."):
+            description = description or scheme.description
+        rows.append({"name": name, "kind": "co-designed" if scheme is not None else "fixed",
+                     "description": description, "source": entry.value})
+    return rows
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -169,19 +336,24 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_list() -> int:
-    import attacks
-    import lenses
+def cmd_list(args: argparse.Namespace) -> int:
     from benchmark.scenes import SCENE_SETS
-    print("lenses:")
-    for name, target in lenses.available().items():
-        print(f"  {name:22s} {target}")
-    print("attackers:")
-    for name, target in attacks.available().items():
-        print(f"  {name:22s} {target}")
+    lens_rows, attacker_rows = lens_catalogue(), attacker_catalogue()
+    if args.json:
+        print(json.dumps({"lenses": lens_rows, "attackers": attacker_rows,
+                          "scene_sets": [{"name": k, "description": v} for k, v in SCENE_SETS.items()]}, indent=1))
+        return 0
+    print("lenses (each runs when named: --lens NAME):")
+    for row in lens_rows:
+        print(f"  {row['name']:16s} {row['kind']:12s} {row['description']}")
+    print("attackers (default: run when --attack is not given; named: only with --attack NAME):")
+    for row in attacker_rows:
+        when = "default" if row["runs_by_default"] else "named"
+        print(f"  {row['name']:26s} {row['kind'] or '?':9s} {row['threat_model'] or '?':18s} {when:8s} "
+              f"{row['description']}")
     print("scene sets:")
     for name, text in SCENE_SETS.items():
-        print(f"  {name:22s} {text}")
+        print(f"  {name:16s} {text}")
     return 0
 
 
@@ -197,6 +369,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(api.plan(**options).render())
         return 0
     out = args.out or Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    started = time.time() - 1.0  # file times may be coarse: a file written from now on is this run's
     profiled = (profiling.profiled(out, get_profile(args.profile).n_val, args.device, args.executor,
                                    trace_python=args.profile_python_memory)
                 if args.profile_time else contextlib.nullcontext())
@@ -209,8 +382,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         paths = leaderboard.publish_run(output.rows, get_profile(args.profile).to_dict(), output.lens_info, out,
                                         settings=output.settings)
         print(f"published {len(paths)} leaderboard entries; rendered the leaderboard")
-    print(f"wrote {out}/results.json, table.md, table.csv and samples_*.png ({results.meta['wall_s']:.1f} s)")
+    print(f"wrote {out}/: {', '.join(files_written(out, started))} ({results.meta['wall_s']:.1f} s)")
     return report_failures(results.failed)
+
+
+def files_written(folder: Path, since: float) -> list[str]:
+    """The files under `folder` written at or after `since` (a time.time()), relative, sorted."""
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file() and p.stat().st_mtime >= since)
 
 
 def report_failures(failed: list) -> int:
@@ -279,7 +457,14 @@ def mask_spec(name: str, profile: str, seed: int):
         path = Path(name)
         if not path.is_file():
             raise FileNotFoundError(f"leaderboard entry {name!r} does not exist")
-        spec = json.loads(path.read_text()).get("lens_spec")
+        try:
+            entry = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{name} is not a leaderboard entry: not JSON ({exc})") from None
+        if not isinstance(entry, dict):
+            raise ValueError(f"{name} is not a leaderboard entry: it holds a JSON {type(entry).__name__}, "
+                             "not an object with a lens_spec")
+        spec = entry.get("lens_spec")
         if not spec:
             raise ValueError(f"{name}: the entry stores no lens_spec to export")
         return lenses.parse_spec(spec, source=name)
@@ -288,6 +473,9 @@ def mask_spec(name: str, profile: str, seed: int):
 
 def cmd_export_mask(args: argparse.Namespace) -> int:
     from lenses.mask_export import height_map, write_height_map
+    if args.out.is_dir():
+        raise ValueError(f"--out {str(args.out)!r} is a folder; give the file to write, e.g. "
+                         f"{args.out / ('mask.' + args.fmt.replace('zemax-gridsag', 'dat'))}")
     spec = mask_spec(args.lens, args.profile, args.seed)
     heights = height_map(spec, args.samples)
     written = write_height_map(heights, args.out, args.fmt)
@@ -314,11 +502,11 @@ def cmd_pretrain(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from lenses.registry import DuplicateNameError
     from benchmark.runner.diagnostics.known_warnings import silence_known_warnings
     silence_known_warnings()
     parser = build_parser()
     args = parser.parse_args(argv)
+    from lenses.registry import DuplicateNameError  # imports torch: after --help has answered
     if args.command == "run" and args.profile_python_memory and not args.profile_time:
         parser.error("--profile-python-memory traces allocations inside --profile-time's profile; add --profile-time")
     if args.command == "run" and args.dry_run and (args.profile_time or args.publish):
@@ -330,7 +518,26 @@ def main(argv: list[str] | None = None) -> int:
                 "export-mask": cmd_export_mask, "pretrain": cmd_pretrain,
                 "pretrain-attacker": cmd_pretrain_attacker, "ship-lens": cmd_ship_lens}
     try:
-        return commands[args.command](*(() if args.command == "list" else (args,)))
+        return commands[args.command](args)
     except (ValueError, LookupError, NotImplementedError, FileNotFoundError, DuplicateNameError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # a full disk, a read-only or another user's folder: a sentence naming the path
+        print(f"error: {os_error_message(exc)}", file=sys.stderr)
+        return 2
+
+
+def os_error_message(exc: OSError) -> str:
+    """One sentence for an OSError: the path, what went wrong, and what to do about it."""
+    path = exc.filename if exc.filename is not None else "a file"
+    reason = exc.strerror or str(exc)
+    hint = {errno.ENOSPC: "the disk is full; free some space or write elsewhere (--out, PLB_CACHE)",
+            errno.EDQUOT: "the disk quota is used up; free some space or write elsewhere (--out, PLB_CACHE)",
+            errno.EROFS: "the file system is read-only; write elsewhere (--out, PLB_CACHE)",
+            errno.EACCES: "you may not write there (another user's folder?); write elsewhere (--out, PLB_CACHE "
+                          "for the cache)",
+            errno.EPERM: "you may not write there (another user's folder?); write elsewhere (--out, PLB_CACHE "
+                         "for the cache)",
+            errno.EISDIR: "it is a folder; give a file path",
+            errno.ENOTDIR: "a part of that path is a file, not a folder"}.get(exc.errno or 0, "")
+    return f"cannot use {path}: {reason}" + (f"; {hint}" if hint else "")

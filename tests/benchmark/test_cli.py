@@ -28,6 +28,33 @@ def test_run_writes_results_tables_and_pictures(smoke_run):
     assert "| lens" in proc.stdout
 
 
+def test_final_line_names_every_file_written(smoke_run):
+    """The run's "wrote" line lists every file in --out: charts, plates.csv, ceiling_check.json included."""
+    out, proc = smoke_run
+    line = next(x for x in proc.stdout.splitlines()[::-1] if x.startswith("wrote "))
+    assert line.startswith(f"wrote {out}/: ")
+    named = set(line[len(f"wrote {out}/: "):].rsplit(" (", 1)[0].split(", "))
+    on_disk = {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()}
+    assert named == on_disk and {"results.json", "table.md", "table.csv"} <= named
+    assert any(name.endswith(".png") and not name.startswith("samples_") for name in named)  # a chart
+
+
+def test_plate_readers_on_scenes_without_plates_say_so(tmp_path):
+    """--scenes photos has no plates: the reader's row fails with that sentence (was a ZeroDivisionError),
+    and the other rows are written."""
+    proc = subprocess.run([sys.executable, "-m", "benchmark", "-q", "run", "--lens", "ideal", "--scenes", "photos",
+                           "--attack", "identity", "--attack", "lpdr-oracle", "--profile", "smoke", "--out",
+                           str(tmp_path)], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 1, proc.stderr[-3000:]
+    assert "ZeroDivisionError" not in proc.stderr + proc.stdout
+    results = read_results(tmp_path / "results.json")
+    failed = [r for r in results.rows if not r.ok]
+    assert failed and {r.reader for r in failed} == {"lpdr-oracle"}
+    for r in failed:
+        assert "the scenes 'photos' hold no licence plates" in r.error.message
+    assert any(r.ok and r.kind == "restorer" and r.attack == "identity" for r in results.rows)
+
+
 def test_rows_follow_the_schema(smoke_run):
     out, _ = smoke_run
     results = read_results(out / "results.json")
