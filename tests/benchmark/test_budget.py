@@ -44,3 +44,19 @@ def test_no_budget_and_other_threads_run_unbounded():
 def test_an_attacker_past_its_budget_is_a_failed_row_error():
     error = attempt("slow", "fit", lambda: time.sleep(30), budget_s=0.2)
     assert error.attacker == "slow" and error.stage == "fit" and "budget of 0.2 s" in error.message
+
+
+def test_a_native_call_that_overruns_the_budget_is_named_in_the_message():
+    """The budget is a signal: one long C call (here a key derivation that holds no Python code) runs
+    to its end first, and the message says how long the step really took and why (issue 38, 10)."""
+    import hashlib
+    t0 = time.perf_counter()
+    hashlib.pbkdf2_hmac("sha256", b"p", b"s", 20_000)
+    rounds = int(20_000 * 1.5 / max(time.perf_counter() - t0, 1e-4))  # about 1.5 s in one C call
+    with pytest.raises(BudgetExceeded) as stop:
+        with time_budget(0.2, "restore"):
+            hashlib.pbkdf2_hmac("sha256", b"p", b"s", rounds)
+    message = str(stop.value)
+    spent = float(message.split("was stopped after ")[1].split(" s")[0])
+    assert spent >= 0.9, message
+    assert "a native call that was running finished first" in message and "past the budget" in message
