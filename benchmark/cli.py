@@ -101,19 +101,6 @@ def _seeds(text: str) -> list[int]:
     return seeds
 
 
-def _samples(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--samples must be an integer, got {text!r}") from None
-    if not 5 <= n <= MAX_MASK_SAMPLES:
-        gib = n * n * 8 / 2**30
-        raise argparse.ArgumentTypeError(
-            f"--samples must lie in 5 .. {MAX_MASK_SAMPLES} grid nodes per side, got {n} "
-            f"({gib:.1f} GiB per {n} x {n} float64 grid)")
-    return n
-
-
 def _plate_format(text: str) -> str:
     if not text or set(text) - {"L", "D"}:
         raise argparse.ArgumentTypeError(f"--plate-format takes L (letter) and D (digit) only, like LLDDDDD, "
@@ -229,7 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="npy (float64), tiff (32-bit float), zemax-gridsag (OpticStudio Grid Sag .DAT, mm), "
                            "csv (x_mm, y_mm, height_um); metadata in PATH.json beside it")
     mask.add_argument("--out", type=Path, required=True, metavar="PATH", help="file to write")
-    mask.add_argument("--samples", type=_samples, default=257,
+    mask.add_argument("--samples", type=int, default=257,
                       help=f"grid nodes per side across the aperture, 5 .. {MAX_MASK_SAMPLES} (default 257)")
     mask.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
                       help="a co-designed lens's training profile: %(choices)s (default: quick)")
@@ -473,6 +460,9 @@ def mask_spec(name: str, profile: str, seed: int):
 
 def cmd_export_mask(args: argparse.Namespace) -> int:
     from lenses.mask_export import height_map, write_height_map
+    if args.samples > MAX_MASK_SAMPLES:  # before any work: 100000 would ask for 74.5 GiB per grid
+        raise ValueError(f"--samples must lie in 5 .. {MAX_MASK_SAMPLES} grid nodes per side, got {args.samples} "
+                         f"({args.samples ** 2 * 8 / 2**30:.1f} GiB per {args.samples} x {args.samples} float64 grid)")
     if args.out.is_dir():
         raise ValueError(f"--out {str(args.out)!r} is a folder; give the file to write, e.g. "
                          f"{args.out / ('mask.' + args.fmt.replace('zemax-gridsag', 'dat'))}")
