@@ -26,14 +26,12 @@ def _first_as_hwc(images: torch.Tensor) -> np.ndarray:
 
 
 def sample_grid(target: Target, lens: lenses.Lens, out: Attacked, folder: Path) -> str:
-    """One PNG: scene, PSF, sensor image and each restorer's output with its score; its file name."""
-    scores = {r.attack: f"PSNR {r.metrics['psnr_db']:.2f} dB, SSIM {r.metrics['ssim']:.3f}" for r in out.rows
-              if r.attack == r.restorer and "psnr_db" in r.metrics and "ssim" in r.metrics}
+    """One PNG: scene, PSF, sensor image and each restorer's output, each with its own PSNR / SSIM
+    (computed by the chart for the image shown); its file name."""
     as_hwc = _first_as_hwc
     name = f"samples_{target.lens_name}_seed{target.ctx.seed}.png".replace("/", "_")
     write_sample_grid(folder / name, target.lens_name, lens.psf().detach().cpu().numpy(),
-                      as_hwc(target.sharp), as_hwc(target.sensor), {k: as_hwc(v) for k, v in out.restored.items()},
-                      scores)
+                      as_hwc(target.sharp), as_hwc(target.sensor), {k: as_hwc(v) for k, v in out.restored.items()})
     return name
 
 
@@ -60,7 +58,7 @@ def plate_gallery(target: Target, out: Attacked, reader: str, folder: Path) -> s
     reads = {"sensor": [out.reads[reader][i] for i in pick],
              **{n: [out.reads[c][i] for i in pick] for n, c in chains.items()}}
     name = f"plates_{target.lens_name}_{reader}_seed{target.ctx.seed}.png".replace("/", "_")
-    write_plate_gallery(images, scenes, reads, folder / name)
+    write_plate_gallery(images, scenes, reads, folder / name, reader=reader)
     return name
 
 

@@ -36,8 +36,8 @@ def test_width_chart_has_one_panel_per_lens_and_one_curve_per_chain(tmp_path):
     path = plate_width.write_plate_width_chart(records(), tmp_path / "plates" / "width.png")
     assert path.read_bytes()[:8] == PNG_MAGIC
     sharp, gp = [ax for ax in plate_width.plate_width_figure(records()).axes if ax.get_visible()]
-    assert (sharp.get_title(), gp.get_title()) == ("sharp", "gp")
-    assert len(sharp.get_lines()) == 1 and len(gp.get_lines()) == 2
+    assert (sharp.get_title(loc="left"), gp.get_title(loc="left")) == ("lens: sharp", "lens: gp")
+    assert len(sharp.containers) == 1 and len(gp.containers) == 2  # one curve with error bars per chain
     assert {t.get_text().split(" (")[0] for t in gp.get_legend().get_texts()} == {
         "lpdr-oracle", "nafnet-known-pairs>lpdr-oracle"}
     with pytest.raises(ValueError, match="no plate records"):
@@ -56,7 +56,8 @@ def test_gallery_shows_every_source_and_what_was_read(tmp_path):
     assert path.read_bytes()[:8] == PNG_MAGIC
     axes = plate_gallery.plate_gallery_figure(images, scenes, reads, max_plates=3).axes
     assert len(axes) == 3 * 3
-    titles = [ax.get_title() for ax in axes]
-    assert plate.text in titles and all(t == "" for t in titles[1::3] + titles[2::3])
+    assert [ax.get_title() for ax in axes] == list(images) + [""] * 6  # the columns' sources, on top
+    reads_shown = [ax.xaxis.label.get_text() for ax in axes]  # under each crop: what was read
+    assert reads_shown[0] == plate.text and all(t == "" for t in reads_shown[1::3] + reads_shown[2::3])
     with pytest.raises(ValueError, match="expected"):
         plate_gallery.write_plate_gallery({"sharp": sharp[:1]}, scenes, {}, tmp_path / "bad.png")

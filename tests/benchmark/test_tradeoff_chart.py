@@ -5,11 +5,11 @@ from __future__ import annotations
 import itertools
 
 import pytest
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.text import Text
 
 from benchmark.results.charts.labels import spread
 from benchmark.results.charts.tradeoff import TradeoffPoint, tradeoff_figure
+from chart_layout import rendered_labels  # tests/chart_layout.py, shared with the run charts' legibility test
 
 
 def point(lens: str, profile: str, privacy: float, utility: float, err: float = 0.5) -> TradeoffPoint:
@@ -22,12 +22,6 @@ def crowded() -> list[TradeoffPoint]:
     pts = [point(f"lens-{i:02d}-with-a-long-name", "quick", 0.0, 0.160 + 0.0005 * (i % 3)) for i in range(12)]
     pts += [point("far", "quick", 60.0, 0.21, 5.0)]
     return pts + [point(name, "smoke", 0.0, 0.047) for name in ("ideal", "defocus", "sharp")]
-
-
-def rendered_labels(fig):
-    FigureCanvasAgg(fig).draw()
-    renderer = fig.canvas.get_renderer()
-    return {ax: [t for t in ax.texts] for ax in fig.axes}, renderer
 
 
 def test_crowded_labels_never_overlap_and_stay_in_the_figure():

@@ -1,7 +1,9 @@
-"""A gallery of plate crops: what each source (sharp, sensor, restorers) shows and what was read from it."""
+"""A gallery of plate crops: what each source (sharp, sensor, restorers) shows and what was read from it,
+with a caption saying how to read it."""
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -16,16 +18,23 @@ from benchmark.scenes import Scene
 __all__ = ["plate_gallery_figure", "write_plate_gallery"]
 
 
+DPI = 100
+FONT_PT, READ_PT, NOTE_PT = 9.0, 9.0, 9.0
+# Geometry in inches: a crop cell, the read under it, the column titles, the caption.
+_CELL_W_IN, _CELL_H_IN, _READ_IN, _LEFT_IN, _HEADER_IN, _NOTE_LINE_IN = 2.2, 0.95, 0.3, 0.9, 0.75, 0.19
+
+
 def write_plate_gallery(images: Mapping[str, torch.Tensor], scenes: Sequence[Scene],
                         reads: Mapping[str, Sequence[Sequence[PlateRead]]], path: Path,
-                        max_plates: int = 8, context: float = 0.6) -> Path:
+                        max_plates: int = 8, context: float = 0.6, reader: str | None = None) -> Path:
     """Write ``plate_gallery_figure`` (same arguments) to ``path`` (a PNG); returns ``path``."""
-    return save_figure(plate_gallery_figure(images, scenes, reads, max_plates, context), path, dpi=110)
+    return save_figure(plate_gallery_figure(images, scenes, reads, max_plates, context, reader), path, dpi=DPI,
+                       layout=False)
 
 
 def plate_gallery_figure(images: Mapping[str, torch.Tensor], scenes: Sequence[Scene],
                          reads: Mapping[str, Sequence[Sequence[PlateRead]]], max_plates: int = 8,
-                         context: float = 0.6) -> Figure:
+                         context: float = 0.6, reader: str | None = None) -> Figure:
     """Grid of plate crops: one row per plate (widest readable plates first), one column per source.
 
     Args:
@@ -38,7 +47,11 @@ def plate_gallery_figure(images: Mapping[str, torch.Tensor], scenes: Sequence[Sc
         context: The crop extends the plate box by this fraction of its width on each side
             (and as many pixels vertically), so blur spreading out of the plate stays visible.
 
-    Each cell is titled with what was read (green when it equals the truth, red otherwise).
+        reader: The reader's name, for the title.
+
+    Columns are titled with their source; under each crop is what was read there (green when it
+    equals the truth, red otherwise, "-" for nothing read); each row is labelled with the true text
+    and the plate's width; a caption under the grid says so.
     """
     if not images:
         raise ValueError("no images for the gallery: pass {source name: (N, 3, H, W) tensor}")
@@ -51,27 +64,40 @@ def plate_gallery_figure(images: Mapping[str, torch.Tensor], scenes: Sequence[Sc
         raise ValueError("the scenes have no readable plate to show")
     texts = {name: _read_texts(scenes, per_image) for name, per_image in reads.items()}
     sources = list(images)
-    fig = new_figure(figsize=(2.2 * len(sources), 1.2 * len(plates) + 0.4))
-    axes = fig.subplots(len(plates), len(sources), squeeze=False)
+    width = _LEFT_IN + _CELL_W_IN * len(sources) + 0.1
+    caption = "\n".join(textwrap.wrap(
+        "Columns: the sharp scene, the sensor image and each restorer's output, cropped around one plate "
+        f"(rows: the widest readable plates first; left: the true text and the plate's width in px). Under a crop: "
+        f"what {reader or 'the reader'} read there, green when it is exactly the true text, red when it is not, "
+        "'-' when nothing was read there.", int((width - 0.2) * 72 / (0.56 * NOTE_PT))))
+    note_h = (caption.count("\n") + 1) * _NOTE_LINE_IN + 0.2
+    row_h = _CELL_H_IN + _READ_IN
+    height = _HEADER_IN + row_h * len(plates) + note_h
+    fig = new_figure(figsize=(width, height))
     for row, (i, k, plate) in enumerate(plates):
         x0, y0, x1, y1 = plate.box_xyxy
         pad = max(4, round(context * (x1 - x0)))
         for col, name in enumerate(sources):
             image = images[name][i].detach().float().clamp(0, 1).permute(1, 2, 0).cpu().numpy()
             h, w = image.shape[:2]
-            ax = axes[row][col]
+            bottom = height - _HEADER_IN - row_h * row - _CELL_H_IN
+            ax = fig.add_axes(((_LEFT_IN + _CELL_W_IN * col + 0.05) / width, bottom / height,
+                               (_CELL_W_IN - 0.1) / width, _CELL_H_IN / height))
             ax.imshow(image[max(0, y0 - pad):min(h, y1 + pad), max(0, x0 - pad):min(w, x1 + pad)],
-                      interpolation="nearest")
+                      interpolation="nearest", aspect="auto")
             ax.set_xticks([])
             ax.set_yticks([])
             if row == 0:
-                ax.set_xlabel(name, fontsize=8)
-                ax.xaxis.set_label_position("top")
+                ax.set_title(name, fontsize=FONT_PT, fontweight="bold")
             if col == 0:
-                ax.set_ylabel(f"{plate.text}\n{x1 - x0} px", fontsize=7)
+                ax.set_ylabel(f"{plate.text}\n{x1 - x0} px", fontsize=FONT_PT)
             if name in texts:
                 read = texts[name].get((i, k), "")
-                ax.set_title(read or "-", fontsize=8, color="green" if read == plate.text else "red")
+                ax.set_xlabel(read or "-", fontsize=READ_PT, labelpad=2, family="monospace",
+                              color="green" if read == plate.text else "red")
+    fig.suptitle(f"Plates read by {reader}" if reader else "Plates read", fontsize=FONT_PT + 2,
+                 x=_LEFT_IN / width, y=1 - 0.08 / height, ha="left", va="top")
+    fig.text(0.1 / width, 0.1 / height, caption, fontsize=NOTE_PT, color="0.2", ha="left", va="bottom")
     return fig
 
 
