@@ -341,6 +341,20 @@ def write_run_outputs(out: Path, results: Results) -> None:
     write_run_charts(out, results.rows, output.plates, output.bound_curves)
     report.write_tables(out, results.rows)
     write_run_check(out, output.plates, output.lens_info)  # ceiling_check.json; violations logged as ERROR
+    log_attack_flags(results.rows, output.lens_info)
+
+
+def log_attack_flags(rows: list, lens_info: dict) -> list:
+    """Log every attack flag of a run's lenses as a WARNING (benchmark.results.attack_gap; the CLI
+    prints them) and return them; a lens's spec (`lens_info`) decides whether the study's ceiling applies."""
+    from benchmark.results.attack_gap import lens_flags
+    from benchmark.results.observer.published import load_study
+    study = load_study()
+    flags = [f for lens in dict.fromkeys(r.lens for r in rows)
+             for f in lens_flags(lens, rows[0].profile, rows, lens_info.get(lens, {}).get("spec"), study)]
+    for flag in flags:
+        log.warning("attack flag: %s", flag.text())
+    return flags
 
 
 # ---- the dry run ----------------------------------------------------------------------------------

@@ -8,12 +8,16 @@ pooled by resampling within each seed (stratified). The measures:
 
 - ``miou``: the utility row's mIoU, recomputed from per-scene, per-class intersection and union
   counts in every resample (mean over seeds of each seed's pooled mIoU); paired bootstrap.
-- ``psnr_db``: the worst case over restorers, i.e. the highest mean PSNR of the restorers both
-  lenses met (the maximum is taken inside each resample, so choosing it is part of the test);
-  paired bootstrap.
-- ``plate_acc``: the best reader's plate accuracy (each lens's strongest reader or chain among
-  those both met); McNemar's exact test on the plates both read, pooled over seeds, with
-  Newcombe's interval of the paired difference.
+- ``psnr_db``: the ensemble's PSNR (benchmark.results.ensemble): each scene at its best restorer
+  among the restorers both lenses met, averaged over scenes (the per-scene maximum is taken inside
+  each resample); paired bootstrap.
+- ``plate_acc``: the ensemble's plate accuracy: a plate counts as read when any reader chain both
+  lenses met read it exactly; McNemar's exact test on the ensemble's per-plate reads, paired by
+  plate id and pooled over seeds, with Newcombe's interval of the paired difference.
+
+Both ensembles are the per-unit worst case over every attacker both entries ran with per-unit
+outcomes at every shared seed (an attacker missing a seed on either side is left out rather than
+unpaired), so a claim on privacy is decided by the strongest attack the suite has, not by one reader.
 
 Each finding says "holds", "does not hold" or "cannot tell at this sample size" with the
 difference, its 95 % interval, the p-value and n (``benchmark.results.stats.verdict``); a claim that "a is
@@ -32,6 +36,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from benchmark.results import stats
+from benchmark.results.ensemble import plate_ensemble, scene_ensemble, seed_plates
 from benchmark.results.entries import ATTACKER_KINDS, Entry, Stat
 from benchmark.results.schema import Units
 
@@ -53,21 +58,21 @@ class Claim:
 
 PAPER_FINDINGS = (
     Claim("more lambda_deb costs utility", "os-d-1", "os-d-1000", "miou", "greater"),
-    Claim("more lambda_deb lowers the attacker's PSNR", "os-d-1", "os-d-1000", "psnr_db", "greater"),
+    Claim("more lambda_deb lowers the attackers' PSNR (each scene at its best restorer)", "os-d-1", "os-d-1000", "psnr_db", "greater"),
     Claim("more lambda_deb costs utility (1 against 100)", "os-d-1", "os-d-100", "miou", "greater"),
     Claim("more lambda_deb costs utility (100 against 1000)", "os-d-100", "os-d-1000", "miou", "greater"),
     Claim("GP gives lambda_deb = 1000 privacy (attacker PSNR no higher)", "gp", "os-d-1000", "psnr_db", "less"),
-    Claim("GP gives lambda_deb = 1000 plate privacy (best reader no better)", "gp", "os-d-1000", "plate_acc", "less"),
+    Claim("GP gives lambda_deb = 1000 plate privacy (the ensemble of readers reads no more)", "gp", "os-d-1000", "plate_acc", "less"),
     Claim("GP keeps more utility than lambda_deb = 1000", "gp", "os-d-1000", "miou", "greater"),
     Claim("MTAdam gives weaker privacy than lambda_deb = 1000", "os-d-mtadam", "os-d-1000", "psnr_db", "greater"),
     Claim("GP costs utility against no adversary (OS)", "gp", "os", "miou", "less"),
     Claim("GP lowers the attacker's PSNR against OS", "gp", "os", "psnr_db", "less"),
-    Claim("GP lowers the best reader's plate accuracy against OS", "gp", "os", "plate_acc", "less"),
+    Claim("GP lowers the readers' ensemble plate accuracy against OS", "gp", "os", "plate_acc", "less"),
     Claim("the scale-free GP gives more privacy than eq. 4 taken literally (attacker PSNR lower)", "gp",
           "gp-literal", "psnr_db", "less", "suite"),
     Claim("the scale-free GP keeps the utility of eq. 4 taken literally", "gp", "gp-literal", "miou", "greater",
           "suite"),
-    Claim("the scale-free GP lowers the best reader's plate accuracy against eq. 4 taken literally", "gp",
+    Claim("the scale-free GP lowers the readers' ensemble plate accuracy against eq. 4 taken literally", "gp",
           "gp-literal", "plate_acc", "less", "suite"),
     Claim("an information-bound adversary (os-info) lowers the attacker's PSNR against OS", "os-info", "os",
           "psnr_db", "less", "suite"),
@@ -75,7 +80,7 @@ PAPER_FINDINGS = (
           "suite"),
     Claim("defocus costs utility against the ideal lens", "defocus", "ideal", "miou", "less", "suite"),
     Claim("defocus lowers the attacker's PSNR against the ideal lens", "defocus", "ideal", "psnr_db", "less", "suite"),
-    Claim("defocus lowers the best reader's plate accuracy against the ideal lens", "defocus", "ideal", "plate_acc",
+    Claim("defocus lowers the readers' ensemble plate accuracy against the ideal lens", "defocus", "ideal", "plate_acc",
           "less", "suite"),
 )
 
@@ -166,12 +171,12 @@ def _miou(strata: Sequence[np.ndarray]) -> float:
     return float(np.mean(values))
 
 
-def _worst_mean(strata: Sequence[np.ndarray]) -> float:
-    """Highest over columns (restorers) of the mean over strata of the per-stratum mean; strata (n, R)."""
-    return float(np.max(np.mean([x.mean(axis=0) for x in strata], axis=0)))
+def _best_per_scene(strata: Sequence[np.ndarray]) -> float:
+    """Mean over strata of the mean over scenes of each scene's best column (restorer); strata (n, R)."""
+    return float(np.mean([x.max(axis=1).mean() for x in strata]))
 
 
-def _compare_miou(ea: Entry, eb: Entry) -> tuple[stats.Comparison, str, str]:
+def _compare_miou(ea: Entry, eb: Entry) -> tuple[stats.Comparison, Figure, Figure]:
     _, seeds = _with_units(ea, eb, ["utility"], "intersection")
     sa, sb = [], []
     for s in seeds:
@@ -180,7 +185,8 @@ def _compare_miou(ea: Entry, eb: Entry) -> tuple[stats.Comparison, str, str]:
         ia, ib = _aligned([ua, ub])
         sa.append(np.stack([np.array(ua.values["intersection"])[ia], np.array(ua.values["union"])[ia]], axis=1))
         sb.append(np.stack([np.array(ub.values["intersection"])[ib], np.array(ub.values["union"])[ib]], axis=1))
-    return stats.stratified_paired_bootstrap(sa, sb, _miou, n_resamples=N_RESAMPLES), "utility", "utility"
+    return (stats.stratified_paired_bootstrap(sa, sb, _miou, n_resamples=N_RESAMPLES),
+            (ea.metric("utility", "miou"), "utility"), (eb.metric("utility", "miou"), "utility"))
 
 
 def _common_attacks(ea: Entry, eb: Entry, kind: str, metric: str) -> list[str]:
@@ -205,7 +211,14 @@ def _with_units(ea: Entry, eb: Entry, attacks: Sequence[str], value: str) -> tup
     return usable, seeds
 
 
-def _compare_psnr(ea: Entry, eb: Entry) -> tuple[stats.Comparison, str, str]:
+Figure = tuple[Stat | None, str | None]
+
+
+def _seed_rows(entry: Entry, seeds: Sequence[int]) -> list:
+    return [r for r in entry.rows if r.seed in set(seeds)]
+
+
+def _compare_psnr(ea: Entry, eb: Entry) -> tuple[stats.Comparison, Figure, Figure]:
     attacks, seeds = _with_units(ea, eb, _common_attacks(ea, eb, "restorer", "psnr_db"), "psnr_db")
     sa, sb = [], []
     for s in seeds:
@@ -214,39 +227,56 @@ def _compare_psnr(ea: Entry, eb: Entry) -> tuple[stats.Comparison, str, str]:
         columns = [np.array(u.values["psnr_db"])[i] for u, i in zip(units, index)]  # type: ignore[union-attr]
         sa.append(np.stack(columns[:len(attacks)], axis=1))
         sb.append(np.stack(columns[len(attacks):], axis=1))
-    comparison = stats.stratified_paired_bootstrap(sa, sb, _worst_mean, n_resamples=N_RESAMPLES)
-    # The strongest restorer of each side on the full sample (the figure the table shows).
-    pick = lambda x: attacks[int(np.argmax(np.mean([m.mean(axis=0) for m in x], axis=0)))]  # noqa: E731
-    return comparison, pick(sa), pick(sb)
+    comparison = stats.stratified_paired_bootstrap(sa, sb, _best_per_scene, n_resamples=N_RESAMPLES)
+    label = f"per-scene best of {len(attacks)} restorers"
+
+    def figure(e: Entry) -> Figure:
+        found = scene_ensemble(_seed_rows(e, seeds), "psnr_db", set(attacks))
+        if found is None:
+            return None, label
+        return Stat(found.mean, found.seed_std, found.seed_values, found.interval), label
+    return comparison, figure(ea), figure(eb)
 
 
-def _compare_plates(ea: Entry, eb: Entry) -> tuple[stats.Comparison, str, str]:
+def _compare_plates(ea: Entry, eb: Entry) -> tuple[stats.Comparison, Figure, Figure]:
     attacks, seeds = _with_units(ea, eb, _common_attacks(ea, eb, "reader", "plate_acc"), "correct")
-    best = lambda e: max(attacks, key=lambda a: e.metric(a, "plate_acc").mean)  # type: ignore[union-attr]  # noqa: E731
-    attack_a, attack_b = best(ea), best(eb)
+    chosen = set(attacks)
     cells = np.zeros(4, dtype=int)  # both, only a, only b, neither
     for s in seeds:
-        ua, ub = ea.units(attack_a, s), eb.units(attack_b, s)
-        assert ua is not None and ub is not None
-        if not ua.ids or not ub.ids:
+        pa, pb = seed_plates(ea.rows, s, chosen), seed_plates(eb.rows, s, chosen)
+        if pa is None or pb is None or not pa.names or not pb.names:
             continue
-        ia, ib = _aligned([ua, ub])
-        ra, rb = np.array(ua.values["correct"])[ia] == 1, np.array(ub.values["correct"])[ib] == 1
+        common = set(pa.names) & set(pb.names)
+        if not common:
+            raise _Unpaired("cannot tell: the two entries share no plate id for this seed (different scenes)")
+        where_b = {n: i for i, n in enumerate(pb.names)}
+        order = [i for i, n in enumerate(pa.names) if n in common]
+        ra = pa.ensemble[order]
+        rb = pb.ensemble[[where_b[pa.names[i]] for i in order]]
         cells += [int(np.sum(ra & rb)), int(np.sum(ra & ~rb)), int(np.sum(~ra & rb)), int(np.sum(~ra & ~rb))]
     if cells.sum() == 0:
         raise _Unpaired("cannot tell: no readable plate was scored on both lenses")
-    return stats.paired_accuracy_difference(*(int(c) for c in cells)), attack_a, attack_b
+    label = f"ensemble of {len(attacks)} chains"
+
+    def figure(e: Entry) -> Figure:
+        found = plate_ensemble(_seed_rows(e, seeds), chosen)
+        if found is None:
+            return None, label
+        a = found.accuracy
+        values = tuple(a.seed_values)
+        return Stat(a.value, a.seed_std, values, a.interval), label
+    return stats.paired_accuracy_difference(*(int(c) for c in cells)), figure(ea), figure(eb)
 
 
 _COMPARE = {"miou": _compare_miou, "psnr_db": _compare_psnr, "plate_acc": _compare_plates}
 _FIGURE_KIND = {"psnr_db": "restorer", "plate_acc": "reader"}
 
 
-def _figure(entry: Entry, measure: str, attack: str | None) -> Stat | None:
+def _figure(entry: Entry, measure: str) -> Stat | None:
+    """The entry's own figure where no paired comparison was made: utility, or the strongest single
+    attacker's (whether the measure applies at all)."""
     if measure == "miou":
         return entry.metric("utility", "miou")
-    if attack is not None:
-        return entry.metric(attack, measure)
     found = entry.worst_case(measure, _FIGURE_KIND[measure])
     return None if found is None else found[0]
 
@@ -282,15 +312,14 @@ def check_claim(claim: Claim, ea: Entry, eb: Entry) -> Finding:
     made by different co-design trainer versions are not compared (``_same_trainer``)."""
     try:
         _same_trainer(claim, ea, eb)
-        comparison, attack_a, attack_b = _COMPARE[claim.measure](ea, eb)
+        comparison, (stat_a, attack_a), (stat_b, attack_b) = _COMPARE[claim.measure](ea, eb)
     except _Unpaired as why:
         return Finding(ea.profile, claim.text, claim.a, claim.b, claim.measure, claim.source,
-                       _figure(ea, claim.measure, None), _figure(eb, claim.measure, None), None, None, None,
+                       _figure(ea, claim.measure), _figure(eb, claim.measure), None, None, None,
                        stats.CANNOT_TELL, str(why))
     decided = stats.verdict(comparison, claim.direction)
     return Finding(ea.profile, claim.text, claim.a, claim.b, claim.measure, claim.source,
-                   _figure(ea, claim.measure, attack_a), _figure(eb, claim.measure, attack_b), attack_a, attack_b,
-                   comparison, decided.label, decided.text)
+                   stat_a, stat_b, attack_a, attack_b, comparison, decided.label, decided.text)
 
 
 def check_findings(entries: Sequence[Entry], claims: Sequence[Claim] = PAPER_FINDINGS) -> list[Finding]:
@@ -303,7 +332,7 @@ def check_findings(entries: Sequence[Entry], claims: Sequence[Claim] = PAPER_FIN
             ea, eb = by_key.get((claim.a, profile, scenes)), by_key.get((claim.b, profile, scenes))
             if ea is None or eb is None:
                 continue
-            if _figure(ea, claim.measure, None) is None or _figure(eb, claim.measure, None) is None:
+            if _figure(ea, claim.measure) is None or _figure(eb, claim.measure) is None:
                 continue  # nothing measured on one side: the claim does not apply
             found.append(check_claim(claim, ea, eb))
     return found

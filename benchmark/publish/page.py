@@ -123,7 +123,7 @@ def _filter_attrs(profile: str, scenes: str, threat: str) -> str:
 def tradeoff_table(entries: Sequence[Entry], study: Mapping[str, Any] | None = None) -> str:
     """The sortable trade-off table: the columns of the markdown table (`table_columns(study)`) plus
     the threat model, one line per entry and threat view."""
-    columns = table_columns(study)
+    columns = table_columns(study, entries)
     head = "".join(f"<th>{_e(c.header)}</th>" for c in columns[:4]) + "<th>threat model</th>"
     head += "".join(f"<th>{_e(c.header)}</th>" for c in columns[4:])
     lines = []
@@ -237,8 +237,19 @@ def violations_html(found: Sequence[tuple[Entry, Any]]) -> str:
             f"<th>ceiling % (upper 95 %)</th></tr></thead><tbody>{rows}</tbody></table>")
 
 
+def flags_html(flags: Sequence[Any]) -> str:
+    """The "Attack flags" section's body (benchmark.results.attack_gap.Flag), or a line saying there is none."""
+    if not flags:
+        return "<p>None.</p>"
+    rows = "".join(f'<tr class="violation"><td>{_e(f.lens)}</td><td>{_e(f.profile)}</td><td>{_e(f.kind)}</td>'
+                   f"<td>{_e(f.message)}</td></tr>" for f in flags)
+    return ("<table><thead><tr><th>lens</th><th>profile</th><th>flag</th><th>what</th></tr></thead>"
+            f"<tbody>{rows}</tbody></table>")
+
+
 def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequence[Path],
-              study: Mapping[str, Any] | None = None, violations: Sequence[tuple[Entry, Any]] = ()) -> str:
+              study: Mapping[str, Any] | None = None, violations: Sequence[tuple[Entry, Any]] = (),
+              flags: Sequence[Any] = ()) -> str:
     """The whole page as text (deterministic: the same entries give the same bytes); `study`: the
     ideal-observer study, `violations`: the readers above its ceilings (benchmark.results.observer.published)."""
     lenses = list(dict.fromkeys(e.lens for e in entries))
@@ -277,11 +288,14 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
         f"<style>{_STYLE}</style></head><body>",
         "<h1>Privacy Lens Bench leaderboard</h1>",
         "<p>Rendered by <code>python -m benchmark report</code> from <code>leaderboard/entries/*.json</code>; "
-        "mean ± standard deviation over the seeds listed. Worst case = the strongest attacker of the suite for that "
-        "lens, or of the chosen threat model (ranked on the seeds every attacker ran). Click a column header to sort.</p>",
+        "mean ± standard deviation over the seeds listed, [95 % interval]. Ensemble = every attacker of the suite "
+        "for that lens, or of the chosen threat model, at once: a plate counts as read when any chain read it, a "
+        "scene at its best restorer; worst case = the strongest single attacker (ranked on the seeds every "
+        "attacker ran); attack gap = the ideal observer's ceiling minus the ensemble. Click a column header to sort.</p>",
         f'<div class="filters">{filters}<span class="count" id="shown"></span></div>',
         "<h2>Utility against privacy</h2>", tradeoff_table(entries, study),
         "<h2>Ceiling violations</h2>", violations_html(violations),
+        "<h2>Attack flags</h2>", flags_html(flags),
         f'<h2>Utility against privacy, interactive</h2><div class="charts">{"".join(svgs)}</div>',
         "<h2>The paper's findings on these entries</h2>", findings_html(entries),
         "<h2>Samples per lens</h2>", "".join(per_lens) or "<p>No published sample images.</p>",
@@ -290,7 +304,8 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
 
 
 def write_page(path: Path, entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequence[Path],
-               study: Mapping[str, Any] | None = None, violations: Sequence[tuple[Entry, Any]] = ()) -> Path:
+               study: Mapping[str, Any] | None = None, violations: Sequence[tuple[Entry, Any]] = (),
+               flags: Sequence[Any] = ()) -> Path:
     """Write the page to `path` (chart and picture paths are linked relative to its folder)."""
-    atomic_write_text(path, page_html(entries, charts, pictures, study, violations))
+    atomic_write_text(path, page_html(entries, charts, pictures, study, violations, flags))
     return path

@@ -19,15 +19,23 @@ from benchmark.publish.profile_chart import write_profile_chart
 from benchmark.results.charts.tradeoff import write_tradeoff_chart
 from benchmark.results.entries import LEADERBOARD, Entry, display_order, load_entries, locked
 from benchmark.publish.page import write_page
-from benchmark.publish.tables import attacker_table, findings_table, main_table, violations_table
+from benchmark.publish.tables import (attacker_table, contributions_table, ensemble_summary, findings_table,
+                                      flags_table, main_table, violations_table)
+from benchmark.results.attack_gap import CEILING_ALARM, GAP_ALARM, Flag, entry_flags
 from benchmark.results.observer.published import entry_violations, load_study
 
 log = logging.getLogger(__name__)
 
 INTRO = ("Rendered by `python -m benchmark report` from `leaderboard/entries/*.json` (written by "
          "`python -m benchmark run ... --publish`); never edited by hand. Mean ± standard deviation over the seeds "
-         "listed. Worst case = the strongest attacker of the suite for that lens (ranked on the seeds every attacker "
-         "ran, then shown over all of its seeds); W_5% = the plate width below which "
+         "listed, [95 % interval]. Privacy is the ensemble's, the per-unit worst case over every attacker of the suite "
+         "for that lens (benchmark.results.ensemble): a plate counts as read when any reader chain read it exactly "
+         "(Wilson interval on the plates of every seed pooled), a scene counts at its best restorer (scene "
+         "bootstrap); reference rows (the uncorrected `raw` image) are not attackers and stay out. Worst case = the "
+         "strongest single attacker (ranked on the seeds every attacker ran, then shown over all of its seeds), "
+         "beside it. Attack gap = the ideal observer's ceiling at the bin's smallest width minus the ensemble's "
+         "accuracy in the bin (entries without per-plate widths: every readable plate from 32 px, so the gap is a "
+         "lower bound); W_5% = the plate width below which "
          "the attack-independent bound certifies that no attacker reads more than 5 % of plates: Fano = the Gaussian "
          "information bound (lenses.bound), ideal observer = the Bayesian ideal observer's ceiling "
          "(benchmark.results.observer, `studies/ideal_observer.json`, T = 1 and 30 frames), shown only where the study "
@@ -36,8 +44,18 @@ INTRO = ("Rendered by `python -m benchmark report` from `leaderboard/entries/*.j
          "with a stored entry of the same lens and profile: an attacker row keeps the seeds (listed in the attacker "
          "table) and the provenance of the run that measured it. Findings are decided by paired comparisons on the "
          "same scenes and plates (benchmark.publish.findings): paired bootstrap (stratified by seed) for mIoU and the "
-         "worst-case PSNR, McNemar's exact test for the best reader's plate accuracy; 'cannot tell' where the "
-         "sample cannot separate the lenses or an entry carries no per-unit outcomes.")
+         "ensemble's PSNR (each scene at its best restorer), McNemar's exact test on the ensemble's per-plate reads; "
+         "'cannot tell' where the sample cannot separate the lenses or an entry carries no per-unit outcomes.")
+
+
+def flags_text(flags: list[Flag]) -> list[str]:
+    """The README's "Attack flags" section (never left out: it says so when there are none)."""
+    intro = ("In the spirit of AutoAttack (benchmark.results.attack_gap): a reader above the ceiling, a learned "
+             "attacker whose fit was still improving (row note `fit_still_rising`), an attacker that does not learn "
+             "the lens beating one of its family that does (paired test, 5 %), and an attack gap over "
+             f"{100 * GAP_ALARM:.0f} points where the ceiling exceeds {100 * CEILING_ALARM:.0f} % (the suite's "
+             "attackers are weak there: privacy is overstated).")
+    return [intro, "", flags_table(flags) if flags else "None."]
 
 
 def study_charts(directory: Path, charts: Path) -> list[Path]:
@@ -82,14 +100,18 @@ def violations_text(found: list) -> list[str]:
 
 
 def readme_text(entries: list[Entry], charts: list[Path], pictures: list[Path], study: dict | None = None,
-                violations: list | None = None) -> str:
+                violations: list | None = None, flags: list[Flag] | None = None) -> str:
     """The leaderboard README: tables, then the charts and the published pictures (paths relative)."""
     findings = findings_table(entries)
+    summary = ensemble_summary(entries)
     text = ["# Leaderboard", "", INTRO, "",
             "The same tables, sortable and filterable by profile, scenes and threat model, with interactive "
             "charts: [index.html](index.html) (a self-contained page; open it from disk).", "",
-            "## Utility against privacy", "", main_table(entries, study), "",
+            "## Utility against privacy", "", main_table(entries, study), "", *([summary, ""] if summary else []),
             "## Ceiling violations", "", *violations_text(violations or []), "",
+            "## Attack flags", "", *flags_text(flags or []), "",
+            "## The ensemble's chains", "", "Each chain's part in its lens's plate ensemble, pooled over seeds (chains "
+            "that read no plate left out).", "", contributions_table(entries), "",
             *(["## The paper's findings on these entries", "", findings, ""] if findings else []),
             "## Every attacker", "", attacker_table(entries), "", "## Charts", ""]
     text += [f"![{p.stem}](charts/{p.name})" for p in charts]
@@ -119,9 +141,12 @@ def _render(directory: Path) -> list[Path]:
     pictures = sorted((directory / "samples").glob("*.png")) if (directory / "samples").is_dir() else []
     study = load_study(directory)
     violations = entry_violations(entries, study)  # each one logged as an ERROR there
+    flags = entry_flags(entries, study)
+    for flag in flags:
+        log.warning("attack flag: %s", flag.text())
     readme = directory / "README.md"
-    atomic_write_text(readme, readme_text(entries, written, pictures, study, violations))
-    page = write_page(directory / "index.html", entries, written, pictures, study, violations)
+    atomic_write_text(readme, readme_text(entries, written, pictures, study, violations, flags))
+    page = write_page(directory / "index.html", entries, written, pictures, study, violations, flags)
     for path in (readme, *written, page):
         log.debug("wrote %s", path)
     return [readme, *written, page]
@@ -144,5 +169,7 @@ def _update_readme(readme: Path, directory: Path) -> bool:
     entries = display_order(load_entries(directory))
     head, rest = text.split(README_START, 1)
     _, tail = rest.split(README_END, 1)
-    atomic_write_text(readme, f"{head}{README_START}\n{main_table(entries, load_study(directory))}\n{README_END}{tail}")
+    summary = ensemble_summary(entries)
+    atomic_write_text(readme, f"{head}{README_START}\n{main_table(entries, load_study(directory))}\n"
+                              + (f"\n{summary}\n" if summary else "") + f"{README_END}{tail}")
     return True

@@ -127,6 +127,28 @@ def failures_markdown(rows: Sequence[Row]) -> str:
     return "\n".join(lines)
 
 
+def ensemble_markdown(rows: Sequence[Row]) -> str:
+    """Per lens, the ensemble's plate accuracy and PSNR (benchmark.results.ensemble) beside the strongest
+    single chain's, each with its 95 % interval; "" when no row carries per-unit outcomes."""
+    from benchmark.results.ensemble import plate_ensemble, scene_ensemble, strongest_chain
+    lines = []
+    for lens in dict.fromkeys(r.lens for r in rows):
+        mine = [r for r in rows if r.lens == lens]
+        plates, scenes = plate_ensemble(mine), scene_ensemble(mine)
+        if plates is None and scenes is None:
+            continue
+        single = None if plates is None else strongest_chain(plates)
+        lines.append([lens, "" if plates is None else f"{plates.accuracy.text()} ({len(plates.chains)} chains)",
+                      "" if single is None else f"{single[1].text()} ({single[0]})",
+                      "" if scenes is None else f"{scenes.text()} ({len(scenes.restorers)} restorers)"])
+    if not lines:
+        return ""
+    head = ["lens", "ensemble plate acc % [95 %]", "strongest single chain plate acc % [95 %]",
+            "ensemble PSNR dB [95 %]"]
+    return "\n".join(["| " + " | ".join(head) + " |", "|" + "|".join(["---"] * len(head)) + "|"]
+                     + ["| " + " | ".join(md_cell(c) for c in line) + " |" for line in lines])
+
+
 def sectioned_markdown(rows: Sequence[Row]) -> str:
     """table.md: one section per row kind (SECTIONS), then the failed attackers."""
     table = summary_table(rows) if any(r.ok for r in rows) else pd.DataFrame(columns=["kind"])
@@ -140,6 +162,10 @@ def sectioned_markdown(rows: Sequence[Row]) -> str:
         keep = ["lens", "attack", "seeds"] + [c for c in columns if c in section.columns]
         keep += [f"{c}{x}" for c in columns for x in (CI_LOW, CI_HIGH, "_std") if f"{c}{x}" in section.columns]
         parts += [f"### {title}", "", markdown_table(section[keep].dropna(axis=1, how="all")), ""]
+    ensemble = ensemble_markdown(rows)
+    if ensemble:
+        parts += ["### Ensemble: every attacker at once (a plate read by any chain, a scene at its best restorer)", "",
+                  ensemble, ""]
     failures = failures_markdown(rows)
     if failures:
         parts += ["### Failed attackers (no metric; see results.json)", "", failures, ""]

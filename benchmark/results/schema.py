@@ -20,6 +20,12 @@ A row may carry its per-unit outcomes (`units`, see `Units`): the value of each 
 it was scored on, keyed by ids that are the same for every lens of the same profile, scene set and
 seed, so that two lenses are compared on the same scenes and plates (benchmark.publish.findings).
 
+Notes with a meaning the suite reads (``Row.notes``, all strings): ``trainer_version`` (the co-design
+trainer that made a lens or utility row), ``FIT_STILL_RISING`` = "fit_still_rising" ("true" / "false"):
+set by a learned attacker whose fit stopped while its held-out score was still improving; such a
+row's figures are a lower bound on that attacker, and the leaderboard flags it
+(benchmark.results.attack_gap).
+
 Version history of results.json: 1 = flat rows (kind inferred from the attack's name), migrated
 by `migrate_legacy_row`; 2 = this schema (`units` is optional: rows written before it existed
 read with `units` None, "no per-unit outcomes").
@@ -38,6 +44,7 @@ from typing import Any
 from benchmark.store.cache import atomic_write_text, config_hash
 
 __all__ = [
+    "FIT_STILL_RISING",
     "KINDS",
     "LEGACY_PROVENANCE",
     "SCHEMA_VERSION",
@@ -66,6 +73,8 @@ STATUSES = ("ok", "failed")
 # (e.g. the bound running past its budget). A failed row names one of these.
 STAGES = ("load", "fit", "restore", "read", "score", "measure")
 SHARP_LENS = "sharp"
+# The note a learned attacker's row carries when its fit stopped while still improving ("true"/"false").
+FIT_STILL_RISING = "fit_still_rising"
 CHAIN_SEPARATOR = ">"
 # Kinds whose `attack` is the kind itself (no attacker involved).
 _SELF_NAMED = ("lens", "utility", "bound")

@@ -42,6 +42,7 @@ __all__ = [
     "mcnemar_exact",
     "paired_accuracy_difference",
     "paired_bootstrap",
+    "stratified_bootstrap_mean_interval",
     "stratified_paired_bootstrap",
     "verdict",
     "wilson_interval",
@@ -178,6 +179,30 @@ def bootstrap_mean_interval(values: Sequence[float] | np.ndarray, confidence: fl
     _check_confidence(confidence)
     array = _finite_1d(values, "values")
     means = _resampled_means(array, n_resamples, seed)
+    tail = (1.0 - confidence) / 2.0
+    low, high = np.quantile(means, [tail, 1.0 - tail])
+    return float(low), float(high)
+
+
+def stratified_bootstrap_mean_interval(strata: Sequence[Sequence[float] | np.ndarray], confidence: float = 0.95,
+                                       n_resamples: int = 4000, seed: int = 0) -> tuple[float, float]:
+    """Percentile bootstrap interval of the mean over strata (seeds) of each stratum's mean over scenes.
+
+    Each resample draws every stratum's scenes with replacement, keeping its size (the seeds are
+    fixed, the scenes are the sampling units), as ``stratified_paired_bootstrap`` does for a difference.
+
+    Args:
+        strata: Per stratum one finite value per scene, shape (n_s,) with n_s >= 1.
+        confidence, n_resamples, seed: As ``bootstrap_mean_interval``.
+
+    Returns:
+        (low, high) in the units of the values.
+    """
+    _check_confidence(confidence)
+    if not strata:
+        raise ValueError("stratified_bootstrap_mean_interval needs at least one stratum")
+    arrays = [_finite_1d(s, f"stratum {i}") for i, s in enumerate(strata)]
+    means = np.mean([_resampled_means(a, n_resamples, seed + i) for i, a in enumerate(arrays)], axis=0)
     tail = (1.0 - confidence) / 2.0
     low, high = np.quantile(means, [tail, 1.0 - tail])
     return float(low), float(high)

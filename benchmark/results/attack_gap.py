@@ -1,0 +1,270 @@
+"""The attack gap (the ideal observer's ceiling minus the ensemble's plate accuracy) and the flags that
+say when a lens's privacy figure should not be trusted, in the spirit of AutoAttack's checks.
+
+Gap. Per lens and plate-width bin: the T = 1 plate ceiling (``leaderboard/studies/ideal_observer.json``,
+only where the study used the lens's own spec: ``benchmark.results.observer.published.study_record``)
+at the bin's lower edge minus the ensemble's accuracy in the bin (``benchmark.results.ensemble``). The
+ceiling rises with width, so its value at the lower edge is the least over the bin and the gap is a
+lower bound on the bin's mean gap. Plate units without recorded widths give one bin, every readable
+plate (>= READABLE_MIN_WIDTH_PX): the gap "at 32 px". Its 95 % interval combines the ceiling's
+Monte-Carlo interval and the ensemble's Wilson interval (low = ceiling low - ensemble high).
+
+Flags (``Flag.kind``):
+
+- ``above-ceiling``: a reader or chain reads more than the ceiling allows (its Wilson interval above
+  the ceiling's upper limit, ``observer.consistency``): a modelling or scoring error.
+- ``fit-still-rising``: a learned attacker's row carries the note ``fit_still_rising`` = "true"
+  (``schema.FIT_STILL_RISING``): its fit stopped while held-out accuracy was still improving, so it
+  is a lower bound on what that attacker reaches.
+- ``untrained-beats-trained``: an attacker that does not learn the lens (threat model sensor-access)
+  beats, by a paired test at the 5 % level, one of its family that does (same name before the first
+  "-", e.g. nafnet-generic and nafnet-known-pairs; a chain's family is its restorer's with the same
+  reader): the trained one is under-fitted.
+- ``attack-gap``: a gap over ``GAP_ALARM`` (30 points) in a bin where the ceiling exceeds
+  ``CEILING_ALARM`` (50 %): the suite's attackers are weak here, privacy is overstated.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from benchmark.results import stats
+from benchmark.results.ensemble import Accuracy, PlateEnsemble, plate_ensemble, seed_scenes
+from benchmark.results.entries import Entry
+from benchmark.results.observer.ceiling import CeilingCurve
+from benchmark.results.observer.consistency import BinAccuracy, check_consistency
+from benchmark.results.observer.published import study_record, t1_curve
+from benchmark.results.plate_scoring import READABLE_MIN_WIDTH_PX
+from benchmark.results.schema import FIT_STILL_RISING, Row, threat_models
+
+__all__ = ["CEILING_ALARM", "FLAG_KINDS", "GAP_ALARM", "GAP_WIDTHS_PX", "Flag", "Gap", "attack_gaps", "entry_flags",
+           "entry_gaps", "lens_flags"]
+
+GAP_ALARM = 0.30
+CEILING_ALARM = 0.50
+# Widths whose gap the leaderboard shows (a bin starting there, where the entry has one).
+GAP_WIDTHS_PX = (16, 32, 64)
+FLAG_KINDS = ("above-ceiling", "fit-still-rising", "untrained-beats-trained", "attack-gap")
+UNTRAINED = "sensor-access"
+_TRUE, _FALSE = ("true", "1", "yes"), ("false", "0", "no")
+
+
+@dataclasses.dataclass(frozen=True)
+class Gap:
+    """Ceiling minus ensemble accuracy on plates of width [low_px, high_px) (see the module docstring).
+
+    pooled: True when the plates carry no widths and the bin is every readable plate.
+    """
+
+    low_px: float
+    high_px: float
+    ceiling: float
+    ceiling_interval: tuple[float, float]
+    ensemble: Accuracy
+    pooled: bool
+
+    @property
+    def gap(self) -> float:
+        return self.ceiling - self.ensemble.value
+
+    @property
+    def interval(self) -> tuple[float, float]:
+        return self.ceiling_interval[0] - self.ensemble.interval[1], self.ceiling_interval[1] - self.ensemble.interval[0]
+
+    def where(self) -> str:
+        """"32 px" for a pooled bin (all readable plates, from 32 px), else "32-48 px" / ">= 192 px"."""
+        if self.pooled:
+            return f"{self.low_px:g} px (every readable plate >= {self.low_px:g} px)"
+        return f">= {self.low_px:g} px" if math.isinf(self.high_px) else f"{self.low_px:g}-{self.high_px:g} px"
+
+    def text(self) -> str:
+        """"gap [low, high]" in points."""
+        return f"{100 * self.gap:.1f} [{100 * self.interval[0]:.1f}, {100 * self.interval[1]:.1f}]"
+
+
+@dataclasses.dataclass(frozen=True)
+class Flag:
+    """One warning on a lens's privacy figure (``kind`` one of FLAG_KINDS)."""
+
+    lens: str
+    profile: str
+    kind: str
+    message: str
+
+    def __post_init__(self) -> None:
+        if self.kind not in FLAG_KINDS:
+            raise ValueError(f"Flag.kind {self.kind!r} is not one of {FLAG_KINDS}")
+
+    def text(self) -> str:
+        return f"{self.lens} ({self.profile}): {self.kind}: {self.message}"
+
+
+def _ceiling_at(curve: CeilingCurve, width_px: float) -> tuple[float, tuple[float, float]] | None:
+    """The T = 1 plate ceiling and its 95 % interval at `width_px` (linear between tabulated widths);
+    None outside the tabulated widths."""
+    widths = curve.widths_px.astype(float)
+    if not widths[0] <= width_px <= widths[-1]:
+        return None
+    value = float(np.interp(width_px, widths, curve.plate_ceiling))
+    low = float(np.interp(width_px, widths, curve.plate_interval[:, 0]))
+    high = float(np.interp(width_px, widths, curve.plate_interval[:, 1]))
+    return value, (min(low, value), max(high, value))
+
+
+def attack_gaps(ensemble: PlateEnsemble, curve: CeilingCurve) -> list[Gap]:
+    """The gap per width bin of the ensemble (one pooled bin from READABLE_MIN_WIDTH_PX where its plates
+    carry no widths), for bins whose lower edge the curve tabulates."""
+    if ensemble.bins is None:
+        bins: list[tuple[float, float, Accuracy, bool]] = [
+            (float(READABLE_MIN_WIDTH_PX), math.inf, ensemble.accuracy, True)]
+    else:
+        bins = [(b.low_px, b.high_px, b.accuracy, False) for b in ensemble.bins]
+    out = []
+    for low, high, accuracy, pooled in bins:
+        found = _ceiling_at(curve, low)
+        if found is not None and accuracy.n:
+            out.append(Gap(low, high, found[0], found[1], accuracy, pooled))
+    return out
+
+
+def _curve(study: Mapping[str, Any] | None, lens: str, spec: Mapping[str, Any] | None) -> CeilingCurve | None:
+    return t1_curve(study_record(study, lens, spec))
+
+
+def entry_gaps(entry: Entry, study: Mapping[str, Any] | None, attacks: set[str] | None = None) -> list[Gap]:
+    """The entry's gaps (none where the study does not cover its lens spec or no chain has plate units)."""
+    curve = _curve(study, entry.lens, entry.lens_spec)
+    ensemble = None if curve is None else plate_ensemble(entry.rows, attacks)
+    return [] if curve is None or ensemble is None else attack_gaps(ensemble, curve)
+
+
+def _family(name: str) -> str:
+    return name.split("-", 1)[0]
+
+
+def _rising(row: Row) -> bool:
+    value = row.notes.get(FIT_STILL_RISING)
+    if value is None:
+        return False
+    text = value.strip().lower()
+    if text not in _TRUE + _FALSE:
+        raise ValueError(f"row {row.lens}/{row.attack} seed {row.seed}: note {FIT_STILL_RISING!r} is {value!r}; "
+                         f"write one of {_TRUE + _FALSE}")
+    return text in _TRUE
+
+
+def _row_accuracies(lens: str, rows: Sequence[Row]) -> list[BinAccuracy]:
+    """Each reader and chain pooled over its seeds on every readable plate (as the entry check does)."""
+    counts: dict[str, list[int]] = {}
+    for row in rows:
+        acc, n = row.metrics.get("plate_acc"), row.metrics.get("n_plates")
+        if row.ok and row.kind in ("reader", "chain") and acc is not None and n:
+            tally = counts.setdefault(row.attack, [0, 0])
+            tally[0] += round(acc * n)
+            tally[1] += int(n)
+    return [BinAccuracy(attack, lens, READABLE_MIN_WIDTH_PX, math.inf, hits / n, stats.wilson_interval(hits, n), n)
+            for attack, (hits, n) in counts.items() if n]
+
+
+def _stronger_untrained(rows: Sequence[Row]) -> list[str]:
+    """Messages for every (untrained, trained) pair of one family where the untrained one is better
+    by a paired test at the 5 % level: restorers by per-scene PSNR (stratified paired bootstrap),
+    readers and chains by per-plate reads (McNemar)."""
+    threats = threat_models(rows)
+    ok = [r for r in rows if r.ok and r.units is not None]
+    messages = []
+
+    def key(row: Row) -> tuple[str, str | None]:
+        return (_family(row.restorer or row.attack), row.reader if row.kind == "chain" else None)
+
+    for kind, unit, value in (("restorer", "scene", "psnr_db"), ("plates", "plate", "correct")):
+        kinds = ("restorer",) if kind == "restorer" else ("reader", "chain")
+        attacks = list(dict.fromkeys(r.attack for r in ok if r.kind in kinds and r.units.unit == unit  # type: ignore[union-attr]
+                                     and value in r.units.values))  # type: ignore[union-attr]
+        first = {a: next(r for r in ok if r.attack == a) for a in attacks}
+        for weak in attacks:
+            if threats.get(weak) != UNTRAINED:
+                continue
+            for strong in attacks:
+                if strong == weak or threats.get(strong) in (None, UNTRAINED) or key(first[weak]) != key(first[strong]):
+                    continue
+                comparison = (_restorer_comparison(ok, weak, strong) if kind == "restorer"
+                              else _reader_comparison(ok, weak, strong))
+                if comparison is None:
+                    continue
+                decided = stats.verdict(comparison, "greater")
+                if decided.label == stats.HOLDS:
+                    what = "PSNR dB" if kind == "restorer" else "plate accuracy"
+                    scale, unit_text = (1.0, " dB") if kind == "restorer" else (100.0, " pt")
+                    messages.append(
+                        f"{weak} (does not learn the lens) beats {strong} ({threats[strong]}) on {what} by "
+                        f"{scale * comparison.difference:+.2f}{unit_text} [{scale * comparison.low:+.2f}, "
+                        f"{scale * comparison.high:+.2f}] ({decided.text.split(': ', 1)[1]}): {strong} is under-fitted")
+    return messages
+
+
+def _restorer_comparison(rows: Sequence[Row], a: str, b: str) -> stats.Comparison | None:
+    sa, sb = [], []
+    for seed in sorted({r.seed for r in rows}):
+        found = seed_scenes(rows, seed, "psnr_db", {a, b})
+        if found is None or set(found[0]) != {a, b}:
+            continue
+        names, values = found
+        sa.append(values[:, names.index(a)])
+        sb.append(values[:, names.index(b)])
+    if not sa:
+        return None
+    return stats.stratified_paired_bootstrap(sa, sb, lambda s: float(np.mean([x.mean() for x in s])), n_resamples=2000)
+
+
+def _reader_comparison(rows: Sequence[Row], a: str, b: str) -> stats.Comparison | None:
+    ensemble = plate_ensemble(rows, {a, b})
+    if ensemble is None:
+        return None
+    cells = np.zeros(4, dtype=int)
+    for p in ensemble.per_seed:
+        if set(p.chains) != {a, b} or not p.names:
+            continue
+        ra, rb = p.read[p.chains.index(a)], p.read[p.chains.index(b)]
+        cells += [int(np.sum(ra & rb)), int(np.sum(ra & ~rb)), int(np.sum(~ra & rb)), int(np.sum(~ra & ~rb))]
+    return None if cells.sum() == 0 else stats.paired_accuracy_difference(*(int(c) for c in cells))
+
+
+def lens_flags(lens: str, profile: str, rows: Iterable[Row], spec: Mapping[str, Any] | None,
+               study: Mapping[str, Any] | None) -> list[Flag]:
+    """Every flag of one lens's rows (a run's or an entry's), in FLAG_KINDS order; `spec` is the lens
+    spec the study must match for the ceiling flags."""
+    rows = [r for r in rows if r.lens == lens]
+    curve = _curve(study, lens, spec)
+    flags = []
+    if curve is not None:
+        for v in check_consistency(_row_accuracies(lens, rows), {lens: curve}):
+            flags.append(Flag(lens, profile, "above-ceiling", v.message()))
+    rising: dict[str, list[int]] = {}
+    for row in rows:
+        if row.ok and _rising(row):
+            rising.setdefault(row.attack, []).append(row.seed)
+    for attack, seeds in rising.items():
+        flags.append(Flag(lens, profile, "fit-still-rising",
+                          f"{attack}'s fit was still improving when it stopped (seed{'s' if len(seeds) > 1 else ''} "
+                          f"{','.join(map(str, sorted(seeds)))}): its figures are a lower bound on that attacker"))
+    flags += [Flag(lens, profile, "untrained-beats-trained", m) for m in _stronger_untrained(rows)]
+    ensemble = None if curve is None else plate_ensemble(rows)
+    for gap in [] if ensemble is None or curve is None else attack_gaps(ensemble, curve):
+        if gap.ceiling > CEILING_ALARM and gap.gap > GAP_ALARM:
+            flags.append(Flag(lens, profile, "attack-gap",
+                              f"the ensemble reads {gap.ensemble.text()} % of plates at {gap.where()} where the ideal "
+                              f"observer's ceiling is {100 * gap.ceiling:.1f} % [{100 * gap.ceiling_interval[0]:.1f}, "
+                              f"{100 * gap.ceiling_interval[1]:.1f}]: a gap of {gap.text()} points: the suite's "
+                              "attackers are weak here: privacy is overstated"))
+    return flags
+
+
+def entry_flags(entries: Iterable[Entry], study: Mapping[str, Any] | None) -> list[Flag]:
+    """Every flag of every entry (its lens spec decides whether the study's ceiling applies)."""
+    return [f for e in entries for f in lens_flags(e.lens, e.profile, e.rows, e.lens_spec, study)]
