@@ -177,3 +177,29 @@ def test_same_data_render_byte_identical_pngs(tmp_path, chart):
             return restorers.write_restorer_speed_chart(restorer_rows(), path)
         return bound.write_bound_chart(crowded_ceilings(), path)
     assert write(tmp_path / "a.png").read_bytes() == write(tmp_path / "b.png").read_bytes()
+
+
+def test_ideal_observer_chart_of_the_published_leaderboard_is_legible_at_page_width(tmp_path):
+    """The leaderboard's own study and entries (12 lenses, up to 24 readers and chains a lens): lens
+    panels three to a row, each legend under its panel and at most MAX_READERS readers in colour."""
+    import json
+    from pathlib import Path
+
+    from benchmark.results.charts import ideal_observer
+    from benchmark.results.entries import load_entries
+    board = Path(__file__).resolve().parents[2] / "leaderboard"
+    study = json.loads((board / "studies" / "ideal_observer.json").read_text())
+    readers = json.loads((board / "studies" / "ideal_observer_readers.json").read_text())
+    entries = load_entries(board)
+    fig = ideal_observer.ideal_observer_figure(study, entries, readers)
+    assert_legible_layout(fig, MIN_FONT_PT)
+    assert fig.get_size_inches()[0] * ideal_observer.DPI <= 1200  # shown ~1000 px wide, fonts stay >= 8 pt x 0.83
+    panels = [ax for ax in fig.axes if ax.get_title() in study["lenses"]]
+    assert len(panels) == len(study["lenses"]) >= 10
+    assert len({round(ax.get_position().x0, 3) for ax in panels}) == 3  # three columns
+    for ax in panels:
+        coloured = [c for c in ax.containers if matplotlib.colors.to_hex(c.lines[0].get_color()) != "#8c8c8c"
+                    and c.lines[0].get_marker() == "o"]
+        assert len(coloured) <= ideal_observer.MAX_READERS
+        colours = [matplotlib.colors.to_hex(c.lines[0].get_color()) for c in coloured]
+        assert len(set(colours)) == len(colours)

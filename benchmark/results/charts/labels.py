@@ -1,8 +1,9 @@
-"""Point labels that never overlap: stacked in a column beside the axes, each joined to its point by a
-leader line."""
+"""Labels: point labels that never overlap (stacked in a column beside the axes, each joined to its point by a
+leader line) and legend labels wrapped to a width (`wrap_label`)."""
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 
 from matplotlib.axes import Axes
@@ -57,3 +58,10 @@ def label_points(ax: Axes, points: Sequence[tuple[float, float]], texts: Sequenc
                         arrowprops={"arrowstyle": "-", "color": color, "lw": 0.6, "alpha": 0.7,
                                     "shrinkA": 1, "shrinkB": 3})
             for point, text, color, pos in zip(points, texts, colors, placed)]
+
+
+def wrap_label(text: str, width: int = 40) -> str:
+    """A legend label over lines of at most ``width`` characters, broken at spaces and after a chain's
+    ``>`` (a word longer than ``width`` is cut)."""
+    lines = textwrap.wrap(text.replace(">", "> "), width, break_on_hyphens=False)
+    return "\n".join(line.replace("> ", ">") for line in lines)

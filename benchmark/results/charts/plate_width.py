@@ -6,7 +6,6 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-import re
 import textwrap
 
 import matplotlib
@@ -16,6 +15,7 @@ from matplotlib.container import ErrorbarContainer
 from matplotlib.figure import Figure
 
 from benchmark.results.charts import new_figure, save_figure
+from benchmark.results.charts.labels import wrap_label
 from benchmark.results.plate_scoring import WIDTH_BINS_PX
 from benchmark.results.stats import wilson_interval
 
@@ -66,18 +66,6 @@ MAX_CHAINS = 6
 # tab10 without its grey (index 7): grey is the "other chains" range's.
 PALETTE = tuple(matplotlib.colormaps["tab10"](i) for i in range(10) if i != 7)
 _MARKERS = "os^Dv<P"
-_LABEL_CHARS = 40
-
-
-def _label(text: str, width: int = _LABEL_CHARS) -> str:
-    """A legend label over at most a few lines of ``width`` characters, broken after a chain's ``>``."""
-    lines: list[str] = []
-    for part in re.split(r"(?<=>)", text):
-        if lines and len(lines[-1]) + len(part) <= width:
-            lines[-1] += part
-        else:
-            lines.append(part)
-    return "\n".join(piece[i:i + width] for piece in lines for i in range(0, max(len(piece), 1), width))
 
 
 def chain_strength(acc: np.ndarray, counts: np.ndarray) -> float:
@@ -131,7 +119,7 @@ def plate_width_figure(records: list[dict], bins_px: Sequence[int] = WIDTH_BINS_
     heights = []
     for lens in lenses:
         shown, grouped = panels[lens]
-        lines = sum(_label(f"{a} (n=0000)").count("\n") + 1 for a in shown) + bool(grouped) * 2 + 1
+        lines = sum(wrap_label(f"{a} (n=0000)").count("\n") + 1 for a in shown) + bool(grouped) * 2 + 1
         heights.append(max(_MIN_AXES_H_IN, lines * line_in + 0.3))
     width = _LEFT_IN + _AXES_W_IN + _GAP_IN + _LEGEND_W_IN
     total = _HEADER_IN + sum(h + _PANEL_TOP_IN + _PANEL_BOTTOM_IN for h in heights) + _NOTE_IN
@@ -150,7 +138,7 @@ def plate_width_figure(records: list[dict], bins_px: Sequence[int] = WIDTH_BINS_
             low = np.where(has, accs, np.inf).min(axis=0)
             high = np.where(has, accs, -np.inf).max(axis=0)
             ax.fill_between(centres[keep], low[keep], high[keep], color="0.55", alpha=0.3, lw=0,
-                            label=_label(f"{len(grouped)} other chains: range of their accuracy"))
+                            label=wrap_label(f"{len(grouped)} other chains: range of their accuracy"))
         for k, attack in enumerate(shown):
             _, acc, counts = curves[(lens, attack)]
             keep = counts > 0
@@ -158,10 +146,10 @@ def plate_width_figure(records: list[dict], bins_px: Sequence[int] = WIDTH_BINS_
             nudge = np.exp(0.035 * (k - (len(shown) - 1) / 2))
             ax.errorbar(centres[keep] * nudge, acc[keep], yerr=_wilson_errors(acc[keep], counts[keep]),
                         marker=_MARKERS[k % len(_MARKERS)], ms=4.5, lw=1.3, elinewidth=0.9, capsize=2.5,
-                        color=colour, label=_label(f"{attack} (n={int(counts.sum())})"))
+                        color=colour, label=wrap_label(f"{attack} (n={int(counts.sum())})"))
         if ceilings and lens in ceilings:
             widths, ceiling = ceilings[lens]
-            ax.plot(widths, ceiling, "k--", lw=1.1, label=_label("ceiling for any attacker (Fano bound)"))
+            ax.plot(widths, ceiling, "k--", lw=1.1, label=wrap_label("ceiling for any attacker (Fano bound)"))
         ax.set_xscale("log")
         ax.set_xlim(x_low, x_high)
         ax.set_xticks(edges)
