@@ -146,24 +146,28 @@ def test_sample_grid_scores_each_image_shown():
 
 
 def test_plate_gallery_reads_sit_under_crops_and_a_caption_explains_them():
+    """Eight sources (sharp, sensor, six restorers): two blocks of at most MAX_COLUMNS, each titled."""
     scenes = load_scenes("synthetic", "val", 4, (512, 1024), 0)
     sharp = torch.from_numpy(np.stack([s.image for s in scenes])).permute(0, 3, 1, 2)
     plates = [(i, p) for i, s in enumerate(scenes) for p in s.plates if readable(p)]
+    restorer_names = ["wiener-known-psf", "nafnet-known-pairs", "richardson-lucy-known-psf", "r4", "r5", "r6"]
     reads = {name: [[PlateRead(p.text if k % 2 else "WRONG12", tuple(map(float, p.box_xyxy)), 0.9)
-                     for k, p in enumerate(s.plates)] for s in scenes] for name in ("sensor", "r1", "r2", "r3")}
-    images = {"sharp": sharp, "sensor": sharp * 0.5, **{n: sharp.flip(-1) for n in ("r1", "r2", "r3")}}
+                     for k, p in enumerate(s.plates)] for s in scenes] for name in ["sensor"] + restorer_names}
+    images = {"sharp": sharp, "sensor": sharp * 0.5, **{n: sharp.flip(-1) for n in restorer_names}}
     fig = plate_gallery.plate_gallery_figure(images, scenes, reads, max_plates=6, reader="lpdr-oracle")
     assert_legible_layout(fig, MIN_FONT_PT)
+    assert fig.get_size_inches()[0] * plate_gallery.DPI <= 1200
     _, renderer = rendered_labels(fig)
     columns = [ax for ax in fig.axes if ax.get_title()]
-    assert [ax.get_title() for ax in columns] == list(images)
+    assert sorted(ax.get_title() for ax in columns) == sorted(images)
+    assert len({round(ax.get_position().y1, 3) for ax in columns}) == 2  # two blocks, each with its titles
     reads_shown = [(ax, ax.xaxis.label) for ax in fig.axes if ax.xaxis.label.get_text()]
-    assert len(reads_shown) == 4 * min(6, len(plates))
+    assert len(reads_shown) == 7 * min(6, len(plates))
     assert {r.get_color() for _, r in reads_shown} == {"green", "red"}
     for ax, read in reads_shown:  # under its crop, and over no column title
         box = read.get_window_extent(renderer)
         assert box.y1 <= ax.get_window_extent().y0 + 1
-        assert not any(box.overlaps(ax.title.get_window_extent(renderer)) for ax in columns)
+        assert not any(box.overlaps(col.title.get_window_extent(renderer)) for col in columns)
     caption = " ".join(t.get_text().replace("\n", " ") for t in fig.texts)
     assert "lpdr-oracle read there" in caption and "green" in caption and "red" in caption
 

@@ -22,6 +22,10 @@ DPI = 100
 FONT_PT, READ_PT, NOTE_PT = 9.0, 9.0, 9.0
 # Geometry in inches: a crop cell, the read under it, the column titles, the caption.
 _CELL_W_IN, _CELL_H_IN, _READ_IN, _LEFT_IN, _HEADER_IN, _NOTE_LINE_IN = 2.2, 0.95, 0.3, 0.9, 0.75, 0.19
+# At most this many sources side by side (about 1200 px); more go into further blocks below, each
+# with its own column titles, so that the gallery stays legible at page width.
+MAX_COLUMNS = 5
+_BLOCK_GAP_IN = 0.45
 
 
 def write_plate_gallery(images: Mapping[str, torch.Tensor], scenes: Sequence[Scene],
@@ -49,7 +53,8 @@ def plate_gallery_figure(images: Mapping[str, torch.Tensor], scenes: Sequence[Sc
 
         reader: The reader's name, for the title.
 
-    Columns are titled with their source; under each crop is what was read there (green when it
+    Columns are titled with their source (at most MAX_COLUMNS side by side, further sources in blocks
+    below); under each crop is what was read there (green when it
     equals the truth, red otherwise, "-" for nothing read); each row is labelled with the true text
     and the plate's width; a caption under the grid says so.
     """
@@ -64,7 +69,8 @@ def plate_gallery_figure(images: Mapping[str, torch.Tensor], scenes: Sequence[Sc
         raise ValueError("the scenes have no readable plate to show")
     texts = {name: _read_texts(scenes, per_image) for name, per_image in reads.items()}
     sources = list(images)
-    width = _LEFT_IN + _CELL_W_IN * len(sources) + 0.1
+    blocks = [sources[b:b + MAX_COLUMNS] for b in range(0, len(sources), MAX_COLUMNS)]
+    width = _LEFT_IN + _CELL_W_IN * len(blocks[0]) + 0.1
     caption = "\n".join(textwrap.wrap(
         "Columns: the sharp scene, the sensor image and each restorer's output, cropped around one plate "
         f"(rows: the widest readable plates first; left: the true text and the plate's width in px). Under a crop: "
@@ -72,15 +78,16 @@ def plate_gallery_figure(images: Mapping[str, torch.Tensor], scenes: Sequence[Sc
         "'-' when nothing was read there.", int((width - 0.2) * 72 / (0.56 * NOTE_PT))))
     note_h = (caption.count("\n") + 1) * _NOTE_LINE_IN + 0.2
     row_h = _CELL_H_IN + _READ_IN
-    height = _HEADER_IN + row_h * len(plates) + note_h
+    block_h = row_h * len(plates) + _BLOCK_GAP_IN
+    height = _HEADER_IN + block_h * len(blocks) - _BLOCK_GAP_IN + note_h
     fig = new_figure(figsize=(width, height))
     for row, (i, k, plate) in enumerate(plates):
         x0, y0, x1, y1 = plate.box_xyxy
         pad = max(4, round(context * (x1 - x0)))
-        for col, name in enumerate(sources):
+        for block, col, name in ((b, c, n) for b, names in enumerate(blocks) for c, n in enumerate(names)):
             image = images[name][i].detach().float().clamp(0, 1).permute(1, 2, 0).cpu().numpy()
             h, w = image.shape[:2]
-            bottom = height - _HEADER_IN - row_h * row - _CELL_H_IN
+            bottom = height - _HEADER_IN - block_h * block - row_h * row - _CELL_H_IN
             ax = fig.add_axes(((_LEFT_IN + _CELL_W_IN * col + 0.05) / width, bottom / height,
                                (_CELL_W_IN - 0.1) / width, _CELL_H_IN / height))
             ax.imshow(image[max(0, y0 - pad):min(h, y1 + pad), max(0, x0 - pad):min(w, x1 + pad)],
