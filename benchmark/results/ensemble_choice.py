@@ -1,0 +1,180 @@
+"""Choosing the standard attack ensemble from measurements (issue 37, item 1): which chains decide.
+
+On a set of leaderboard entries (the published quick ones), for every attack chain of every lens:
+
+- plates it decides: plates of the lens's plate ensemble (benchmark.results.ensemble) it read
+  **first** (the first chain, in the entry's chain order, i.e. the order its run evaluated them, that
+  read the plate) and plates it read **only** (no other chain of that seed read them);
+- scenes it decides: scenes where it is the best restorer (the first of equal maxima, as
+  ``scene_ensemble`` counts them);
+- its **removal effect**: how much the lens's ensemble plate accuracy (points, pooled over seeds)
+  and ensemble PSNR (dB, mean over seeds of the mean over scenes of the per-scene best) drop when the
+  ensemble is recomputed without it (``plate_ensemble`` / ``seed_scenes`` with the other chains).
+
+The rule (``keeps``): a chain stays in the standard ensemble when its removal changes some lens's
+ensemble plate accuracy by more than ``PLATE_POINTS`` points or its ensemble PSNR by more than
+``PSNR_DB`` dB. The issue adds ``lpdr`` (the paper's detector pipeline) on the sensor image and after
+the strongest restorer (the one that is the best restorer on the most scenes of the entries), and the
+learned reader once it is published. ``PROPOSED_ENSEMBLE`` is what that selects on the published quick
+entries (docs/ensemble.md, written by ``python -m benchmark.studies.ensemble_choice``;
+tests/benchmark/test_ensemble_choice.py recomputes it, so it cannot drift from the entries). It is
+not yet the run's default: that changes with the next re-publish.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+
+from benchmark.results.ensemble import RESTORER_KINDS, plate_ensemble, seed_scenes
+from benchmark.results.entries import Entry
+
+__all__ = ["ChainEffect", "PLATE_POINTS", "PROPOSED_ENSEMBLE", "PSNR_DB", "DOCS", "keeps", "proposed_ensemble",
+           "removal_effects", "strongest_restorer", "ensemble_values"]
+
+# The rule's thresholds: a chain whose removal moves some lens's ensemble by more than this stays.
+PLATE_POINTS = 1.0
+PSNR_DB = 0.1
+# The paper's detector pipeline: kept on the sensor image and after the strongest restorer.
+PAPER_READER = "lpdr"
+DOCS = "docs/ensemble.md"
+
+# What the rule selects on the published quick entries (see the module docstring and DOCS); the test
+# recomputes it from leaderboard/entries/*quick*.json.
+PROPOSED_ENSEMBLE: tuple[str, ...] = (
+    "demosaic-vng", "demosaic-vng>lpdr-oracle", "lpdr", "lpdr-oracle", "nafnet-known-pairs",
+    "nafnet-known-pairs>lpdr-oracle", "richardson-lucy-known-psf", "richardson-lucy-known-psf>lpdr",
+    "training-adversary", "training-adversary>lpdr-oracle", "wiener-known-psf", "wiener-known-psf>lpdr-oracle")
+
+
+@dataclasses.dataclass(frozen=True)
+class ChainEffect:
+    """One chain of one entry: what it decides and what removing it costs the ensemble.
+
+    Attributes:
+        lens, profile, scenes: The entry.
+        attack: The chain (a reader, ``restorer>reader`` chain or restorer).
+        kind: "plates" (a reader chain: joins the plate ensemble) or "scenes" (a restorer).
+        first: Plates it read first (plates chains), pooled over seeds; 0 for a restorer.
+        only: Plates only it read; 0 for a restorer.
+        best_scenes: Scenes where it is the best restorer; 0 for a reader chain.
+        plate_points: Ensemble plate accuracy with it minus without it, in points (0 for a restorer).
+        psnr_db: Ensemble PSNR with it minus without it, in dB (0 for a reader chain).
+    """
+
+    lens: str
+    profile: str
+    scenes: str
+    attack: str
+    kind: str
+    first: int
+    only: int
+    best_scenes: int
+    plate_points: float
+    psnr_db: float
+
+    @property
+    def decides(self) -> bool:
+        """It decides some plate (first or only reader) or scene (its best restorer)."""
+        return bool(self.first or self.only or self.best_scenes)
+
+    @property
+    def matters(self) -> bool:
+        """Its removal moves the ensemble past the rule's thresholds."""
+        return abs(self.plate_points) > PLATE_POINTS or abs(self.psnr_db) > PSNR_DB
+
+
+def _scene_mean(rows: Sequence, attacks: set[str] | None, metric: str = "psnr_db") -> float | None:
+    """The ensemble's scene figure (as ``scene_ensemble``'s ``mean``, without its bootstrap): mean over
+    seeds of each seed's mean over scenes of the per-scene best restorer; None with no restorer."""
+    seeds = sorted({r.seed for r in rows if r.kind in RESTORER_KINDS})
+    means = []
+    for seed in seeds:
+        found = seed_scenes(rows, seed, metric, attacks)
+        if found is not None:
+            means.append(float(found[1].max(axis=1).mean()))
+    return float(np.mean(means)) if means else None
+
+
+def _plate_accuracy(rows: Sequence, attacks: set[str] | None) -> float:
+    """The ensemble's pooled plate accuracy over `attacks` (0 when no chain is left to read)."""
+    ensemble = plate_ensemble(rows, attacks)
+    return 0.0 if ensemble is None else ensemble.accuracy.value
+
+
+def ensemble_values(entry: Entry, attacks: set[str] | None = None) -> tuple[float | None, float | None]:
+    """(ensemble plate accuracy in points, ensemble PSNR in dB) of `entry` over `attacks` (None: every
+    chain); a figure is None where the entry has no per-unit outcomes for it."""
+    has_plates = plate_ensemble(entry.rows) is not None
+    plates = 100 * _plate_accuracy(entry.rows, attacks) if has_plates else None
+    return plates, _scene_mean(entry.rows, attacks)
+
+
+def _entry_effects(entry: Entry) -> list[ChainEffect]:
+    rows = entry.rows
+    out = []
+    ensemble = plate_ensemble(rows)
+    if ensemble is not None:
+        full = 100 * ensemble.accuracy.value
+        chains = set(ensemble.chains)
+        for chain in ensemble.chains:
+            first = only = 0
+            for p in ensemble.per_seed:
+                if chain not in p.chains:
+                    continue
+                i = p.chains.index(chain)
+                read_by = p.read.argmax(axis=0)  # the first chain (in the seed's order) that read each plate
+                first += int((p.read[i] & (read_by == i)).sum())
+                only += int((p.read[i] & (p.read.sum(axis=0) == 1)).sum())
+            without = 100 * _plate_accuracy(rows, chains - {chain})
+            out.append(ChainEffect(entry.lens, entry.profile, entry.scenes, chain, "plates", first, only, 0,
+                                   full - without, 0.0))
+    restorers = list(dict.fromkeys(r.attack for r in rows if r.ok and r.kind in RESTORER_KINDS
+                                   and r.units is not None and r.units.unit == "scene"))
+    full_psnr = _scene_mean(rows, None)
+    if full_psnr is not None:
+        best = dict.fromkeys(restorers, 0)
+        for seed in sorted({r.seed for r in rows}):
+            found = seed_scenes(rows, seed)
+            if found is not None:
+                names, values = found
+                for i in np.argmax(values, axis=1):
+                    best[names[int(i)]] += 1
+        for restorer in restorers:
+            left = _scene_mean(rows, set(restorers) - {restorer})
+            delta = math.inf if left is None else full_psnr - left
+            out.append(ChainEffect(entry.lens, entry.profile, entry.scenes, restorer, "scenes", 0, 0,
+                                   best[restorer], 0.0, delta))
+    return out
+
+
+def removal_effects(entries: Iterable[Entry]) -> list[ChainEffect]:
+    """Every chain of every entry with what it decides and its removal effect (see the module
+    docstring), entries in the given order, chains in each entry's order (reader chains, then restorers)."""
+    return [effect for entry in entries for effect in _entry_effects(entry)]
+
+
+def keeps(effects: Iterable[ChainEffect]) -> list[str]:
+    """The chains the rule keeps: those whose removal moves some entry's ensemble past a threshold
+    (in order of first appearance)."""
+    return list(dict.fromkeys(e.attack for e in effects if e.matters))
+
+
+def strongest_restorer(effects: Iterable[ChainEffect]) -> str | None:
+    """The restorer that is the best restorer on the most scenes over every entry (ties: first named)."""
+    counts: dict[str, int] = {}
+    for e in effects:
+        if e.kind == "scenes":
+            counts[e.attack] = counts.get(e.attack, 0) + e.best_scenes
+    return max(counts, key=lambda k: counts[k]) if counts else None
+
+
+def proposed_ensemble(effects: Sequence[ChainEffect]) -> tuple[str, ...]:
+    """The rule's chains plus ``lpdr`` on the sensor image and after the strongest restorer, sorted."""
+    strongest = strongest_restorer(effects)
+    extra = [PAPER_READER] + ([f"{strongest}>{PAPER_READER}"] if strongest else [])
+    return tuple(sorted(set(keeps(effects)) | set(extra)))
+
