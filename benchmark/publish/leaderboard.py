@@ -114,9 +114,10 @@ def _run_pictures(out: Path, prefix: str, lens: str) -> list[Path]:
 
 def copy_run_pictures(out: Path, lens_names: Iterable[str], profile: str, samples: Path) -> list[Path]:
     """Copy a published run's pictures into the leaderboard: each lens's first sample grid (and
-    co-design curves, for a trained lens), and the run's plate-accuracy-vs-width chart (named after
-    the run's lenses: one chart per published run). Names are made file-safe (``file_safe``): a lens
-    given as a spec path names its pictures after the path with "/" as "_", as its entry is named."""
+    co-design curves, for a trained lens). Names are made file-safe (``file_safe``): a lens given as a
+    spec path names its pictures after the path with "/" as "_", as its entry is named. The run's
+    plate-accuracy-vs-width chart is not copied: `report` draws one per entry from the entry's own
+    per-plate outcomes (benchmark.publish.board_files), whatever the number of runs that published it."""
     lens_names = list(lens_names)
     samples.mkdir(parents=True, exist_ok=True)
     copied = []
@@ -129,10 +130,6 @@ def copy_run_pictures(out: Path, lens_names: Iterable[str], profile: str, sample
         if curves:
             copied.append(Path(shutil.copyfile(curves[0],
                                                samples / f"{file_safe(name)}__{file_safe(profile)}__curves.png")))
-    chart = out / "plate_accuracy_vs_width.png"
-    if chart.is_file():
-        lenses = "+".join(file_safe(n) for n in lens_names)
-        copied.append(Path(shutil.copyfile(chart, samples / f"plate_width__{file_safe(profile)}__{lenses}.png")))
     return copied
 
 

@@ -18,9 +18,9 @@ from benchmark.results.charts.attacker_speed import write_attacker_speed_chart
 from benchmark.publish.profile_chart import write_profile_chart
 from benchmark.results.charts.tradeoff import write_tradeoff_chart
 from benchmark.results.entries import LEADERBOARD, Entry, display_order, load_entries, locked
+from benchmark.publish import board_files
 from benchmark.publish.page import write_page
-from benchmark.publish.tables import (attacker_table, contributions_table, ensemble_summary, findings_table,
-                                      flags_table, main_table, violations_table)
+from benchmark.publish.tables import ensemble_summary, findings_table, flags_table, main_table, violations_table
 from benchmark.results.attack_gap import CEILING_ALARM, GAP_ALARM, Flag, entry_flags
 from benchmark.results.observer.published import entry_violations, load_study
 
@@ -60,6 +60,7 @@ def flags_text(flags: list[Flag]) -> list[str]:
 
 def study_charts(directory: Path, charts: Path) -> list[Path]:
     """Charts of the modelling-choice studies found in `directory`/studies (see benchmark.studies)."""
+    from benchmark.results.charts.nafnet_steps import write_nafnet_steps_chart
     from benchmark.results.charts.studies import psf_grid_figure, utility_size_figure
     from benchmark.results.charts.utility_pretrain import pretrain_figure
     written = []
@@ -68,6 +69,9 @@ def study_charts(directory: Path, charts: Path) -> list[Path]:
         path = directory / "studies" / f"{name}.json"
         if path.is_file():
             written.append(save_figure(figure(json.loads(path.read_text())), charts / f"{name}.png", dpi=100))
+    steps = directory / "studies" / "nafnet_known_pairs_steps.json"  # written by benchmark.studies.nafnet_steps
+    if steps.is_file():
+        written.append(write_nafnet_steps_chart(json.loads(steps.read_text()), charts / f"{steps.stem}.png"))
     return written
 
 
@@ -110,18 +114,14 @@ def readme_text(entries: list[Entry], charts: list[Path], pictures: list[Path], 
             "## Utility against privacy", "", main_table(entries, study), "", *([summary, ""] if summary else []),
             "## Ceiling violations", "", *violations_text(violations or []), "",
             "## Attack flags", "", *flags_text(flags or []), "",
-            "## The ensemble's chains", "", "Each chain's part in its lens's plate ensemble, pooled over seeds (chains "
-            "that read no plate left out).", "", contributions_table(entries), "",
             *(["## The paper's findings on these entries", "", findings, ""] if findings else []),
-            "## Every attacker", "", attacker_table(entries), "", "## Charts", ""]
-    text += [f"![{p.stem}](charts/{p.name})" for p in charts]
-    widths = [p for p in pictures if p.name.startswith("plate_width__")]
-    samples = [p for p in pictures if p not in widths]
-    if widths:
-        text += ["", "## Plate accuracy against plate width (one chart per published run)", ""]
-        text += [f"![{p.stem}](samples/{p.name})" for p in widths]
-    if samples:
-        text += ["", "## Sample images", ""] + [f"![{p.stem}](samples/{p.name})" for p in samples]
+            "## The rest", "",
+            f"- [Every attacker]({board_files.ATTACKERS_PAGE}): each chain's part in its lens's ensemble and every "
+            "attacker's own figures;",
+            f"- [Charts and samples]({board_files.CHARTS_PAGE}): {len(charts)} charts, plate accuracy against width "
+            f"per entry, {len(pictures)} sample pictures;",
+            "- [index.html](index.html): the same, sortable and filterable;",
+            "- [docs/ensemble.md](../docs/ensemble.md): which chains decide the ensemble, and the proposed standard one."]
     return "\n".join(text) + "\n"
 
 
@@ -138,18 +138,21 @@ def _render(directory: Path) -> list[Path]:
     charts.mkdir(parents=True, exist_ok=True)
     written = entry_charts(entries, charts) + study_charts(directory, charts) + observer_chart(directory, entries,
                                                                                                charts)
-    pictures = sorted((directory / "samples").glob("*.png")) if (directory / "samples").is_dir() else []
+    widths = board_files.plate_width_charts(entries, charts)
+    pictures = board_files.backed_samples(entries, directory / "samples")
+    board_files.prune(directory, [*written, *widths, *pictures])  # what no entry or study backs
     study = load_study(directory)
     violations = entry_violations(entries, study)  # each one logged as an ERROR there
     flags = entry_flags(entries, study)
     for flag in flags:
         log.warning("attack flag: %s", flag.text())
     readme = directory / "README.md"
-    atomic_write_text(readme, readme_text(entries, written, pictures, study, violations, flags))
-    page = write_page(directory / "index.html", entries, written, pictures, study, violations, flags)
-    for path in (readme, *written, page):
+    atomic_write_text(readme, readme_text(entries, written + widths, pictures, study, violations, flags))
+    pages = board_files.write_pages(directory, entries, written, widths, pictures)
+    page = write_page(directory / "index.html", entries, written + widths, pictures, study, violations, flags)
+    for path in (readme, *pages, *written, *widths, page):
         log.debug("wrote %s", path)
-    return [readme, *written, page]
+    return [readme, *pages, *written, *widths, page]
 
 
 README_START, README_END = "<!-- results:start -->", "<!-- results:end -->"

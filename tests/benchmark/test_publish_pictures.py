@@ -1,10 +1,12 @@
-"""A published run's pictures reach the leaderboard under stable names, in their own README sections."""
+"""A published run's pictures reach the leaderboard under stable names, listed on its charts page."""
 
 from benchmark.publish import report as leaderboard_report
-from benchmark.publish.leaderboard import copy_run_pictures
+from benchmark.publish.leaderboard import copy_run_pictures, publish
+from benchmark.results.schema import Row
+from benchmark.store.profiles import get_profile
 
 
-def test_first_sample_and_the_width_chart_are_copied_and_listed(tmp_path):
+def test_first_sample_and_curves_are_copied_and_listed_and_the_run_width_chart_is_not(tmp_path):
     run, board = tmp_path / "run", tmp_path / "board"
     run.mkdir()
     (board / "samples").mkdir(parents=True)
@@ -14,10 +16,14 @@ def test_first_sample_and_the_width_chart_are_copied_and_listed(tmp_path):
                        ("curves_gp_seed0.png", b"c0")):
         (run / name).write_bytes(data)
     copied = copy_run_pictures(run, ["gp", "os"], "quick", board / "samples")
-    assert [p.name for p in copied] == ["gp__quick.png", "gp__quick__curves.png", "plate_width__quick__gp+os.png"]
+    # The width chart is drawn per entry by `report` from the entry's plates, never copied per run.
+    assert [p.name for p in copied] == ["gp__quick.png", "gp__quick__curves.png"]
     assert (board / "samples" / "gp__quick.png").read_bytes() == b"s0"
     assert (board / "samples" / "gp__quick__curves.png").read_bytes() == b"c0"
+    common = {"lens": "gp", "seed": 0, "profile": "quick", "scenes": "synthetic"}
+    publish([Row(kind="utility", attack="utility", metrics={"miou": 0.3}, **common)], get_profile("quick").to_dict(),
+            {}, board)
     leaderboard_report.render(board)
-    text = (board / "README.md").read_text()
-    width_at, samples_at = text.index("## Plate accuracy against plate width"), text.index("## Sample images")
-    assert width_at < text.index("plate_width__quick__gp+os.png") < samples_at < text.index("gp__quick.png")
+    text = (board / "charts.md").read_text()
+    assert text.index("## Sample images") < text.index("samples/gp__quick.png)")
+    assert text.index("## Co-design training curves") < text.index("samples/gp__quick__curves.png)")

@@ -86,7 +86,8 @@ def test_table_and_charts_regenerate_identically(tmp_path):
     copy = tmp_path / "leaderboard"
     shutil.copytree(leaderboard.LEADERBOARD, copy)
     leaderboard_report.render(copy)
-    for path in [copy / "README.md", copy / "index.html", *sorted((copy / "charts").glob("*.png"))]:
+    for path in [copy / "README.md", copy / "attackers.md", copy / "charts.md", copy / "index.html",
+                 *sorted((copy / "charts").glob("*.png"))]:
         published = leaderboard.LEADERBOARD / path.relative_to(copy)
         assert published.is_file(), f"{published} is not published; run python -m benchmark report"
         assert path.read_bytes() == published.read_bytes(), f"{published} differs from its entries"

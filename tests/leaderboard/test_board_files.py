@@ -1,0 +1,114 @@
+"""Everything under leaderboard/ is an entry, a study, or written by `report` from them (issue 37, item 5)."""
+
+from __future__ import annotations
+
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from benchmark.publish import board_files
+from benchmark.publish import report as leaderboard_report
+from benchmark.publish.leaderboard import publish
+from benchmark.results.entries import LEADERBOARD, LOCK_FILE, load_entries
+from benchmark.results.schema import Row, Units
+from benchmark.store.profiles import get_profile
+
+LINK = re.compile(r"""(?:\]\(|src=")((?:charts|samples)/[^)"\s]+)""")
+
+
+def _referenced(directory: Path) -> set[Path]:
+    """The charts/ and samples/ files the rendered pages link (README.md, attackers.md, charts.md, index.html)."""
+    found = set()
+    for page in ("README.md", board_files.ATTACKERS_PAGE, board_files.CHARTS_PAGE, "index.html"):
+        found |= {directory / m for m in LINK.findall((directory / page).read_text())}
+    return found
+
+
+def _unbacked(directory: Path) -> list[Path]:
+    """Files under `directory` that are neither an entry, a study, a rendered page nor linked from one."""
+    pages = {directory / n for n in ("README.md", board_files.ATTACKERS_PAGE, board_files.CHARTS_PAGE, "index.html")}
+    linked = _referenced(directory)
+    out = []
+    for path in sorted(p for p in directory.rglob("*") if p.is_file()):
+        top = path.relative_to(directory).parts[0]
+        if top in ("entries", "studies", LOCK_FILE) or path in pages or path in linked:
+            continue
+        out.append(path)
+    return out
+
+
+def test_every_file_of_the_published_leaderboard_is_backed():
+    assert not _unbacked(LEADERBOARD), "orphans under leaderboard/: run python -m benchmark report"
+    missing = [p for p in _referenced(LEADERBOARD) if not p.is_file()]
+    assert not missing, f"pages link files that do not exist: {missing}"
+
+
+def test_the_readme_is_short_and_the_attacker_table_has_its_own_page():
+    readme = (LEADERBOARD / "README.md").read_text()
+    attackers = (LEADERBOARD / board_files.ATTACKERS_PAGE).read_text()
+    assert "## Every attacker" not in readme and "## Every attacker" in attackers
+    assert f"]({board_files.ATTACKERS_PAGE})" in readme and f"]({board_files.CHARTS_PAGE})" in readme
+    assert "![" not in readme, "the README links its charts' page instead of showing every image"
+    assert "## Utility against privacy" in readme
+    # Every attack chain of every entry has a line on the attackers page.
+    for entry in load_entries():
+        for chain in entry.chains():
+            if chain.kind not in ("lens", "utility", "bound"):
+                assert f"| {entry.lens} | {chain.attack} |" in attackers, (entry.lens, chain.attack)
+
+
+@pytest.fixture
+def board(tmp_path) -> Path:
+    copy = tmp_path / "leaderboard"
+    shutil.copytree(LEADERBOARD, copy, ignore=shutil.ignore_patterns("*.png"))
+    for folder in ("charts", "samples"):  # only the sample pictures are inputs; charts are re-drawn
+        (copy / folder).mkdir(exist_ok=True)
+    for path in (LEADERBOARD / "samples").glob("*.png"):
+        shutil.copyfile(path, copy / "samples" / path.name)
+    return copy
+
+
+def test_render_deletes_an_orphan_and_a_stale_image(board):
+    stale_run_chart = board / "samples" / "plate_width__quick__gp+os.png"  # one chart per historical run
+    no_entry = board / "samples" / "no-such-lens__quick.png"  # a sample of a lens without an entry
+    old_chart = board / "charts" / "retired_chart.png"  # a chart kind report no longer draws
+    nested = board / "charts" / "old" / "x.png"
+    nested.parent.mkdir()
+    for path in (stale_run_chart, no_entry, old_chart, nested):
+        Image.fromarray(np.zeros((4, 4), dtype=np.uint8)).save(path)
+    kept_sample = board / "samples" / "gp__quick.png"
+    assert kept_sample.is_file()
+    leaderboard_report.render(board)
+    for path in (stale_run_chart, no_entry, old_chart, nested):
+        assert not path.exists(), f"{path.name} survived the render"
+    assert kept_sample.is_file(), "a sample of a published entry was deleted"
+    assert not _unbacked(board)
+    assert all(p.is_file() for p in _referenced(board))
+
+
+def _plates(attack: str, correct: list[int], widths: list[float]) -> Row:
+    restorer, _, reader = attack.rpartition(">")
+    return Row(kind="chain" if restorer else "reader", attack=attack, restorer=restorer or None, reader=reader,
+               lens="gp", seed=0, profile="quick", scenes="synthetic", metrics={"plate_acc": float(np.mean(correct))},
+               units=Units("plate", "s#", tuple(str(i) for i in range(len(correct))),
+                           {"correct": tuple(correct), "width_px": tuple(widths)}))
+
+
+def test_plate_width_is_one_chart_per_entry_drawn_from_its_plates(tmp_path):
+    board = tmp_path / "board"
+    (board / "entries").mkdir(parents=True)
+    widths = [16.0, 24.0, 40.0, 70.0, 90.0, 130.0]
+    rows = [Row(kind="utility", attack="utility", lens="gp", seed=0, profile="quick", scenes="synthetic",
+                metrics={"miou": 0.3}),
+            _plates("lpdr", [0, 0, 1, 1, 1, 1], widths), _plates("wiener-known-psf>lpdr", [0, 1, 0, 1, 0, 1], widths)]
+    publish(rows, get_profile("quick").to_dict(), {}, board)
+    written = leaderboard_report.render(board)
+    charts = sorted((board / "charts").glob(f"{board_files.PLATE_WIDTH_PREFIX}*.png"))
+    assert [p.name for p in charts] == ["plate_width__gp__quick__synthetic.png"]
+    assert charts[0] in written and f"(charts/{charts[0].name})" in (board / board_files.CHARTS_PAGE).read_text()
+    records = board_files.plate_records(load_entries(board)[0])
+    assert len(records) == 12 and sum(r["correct"] for r in records) == 7
