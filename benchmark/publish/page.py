@@ -21,7 +21,8 @@ from matplotlib.ticker import MaxNLocator
 from benchmark.store.cache import atomic_write_text
 from benchmark.results.charts.tradeoff import TradeoffPoint, tradeoff_points
 from benchmark.results.entries import Entry, file_safe
-from benchmark.publish.tables import FINDINGS_HEAD, findings_lines, table_columns
+from benchmark.publish.tables import (CONVENTION, FINDINGS_HEAD, PRIVATE_LEVEL, Column, findings_lines,
+                                      headline_columns, table_columns, takeaways)
 
 ANY_THREAT = "any attacker"
 # Colour per lens, in order of first appearance (colour-blind-safe "Tableau 10").
@@ -44,6 +45,10 @@ tbody tr:nth-child(even){background:#fafafa}
 svg .point{cursor:pointer}svg .axis{stroke:#444}svg .grid{stroke:#e6e6e6}svg text{font-size:11px;fill:#333}
 #tip{position:absolute;display:none;background:#fff;border:1px solid #888;border-radius:4px;padding:.3rem .5rem;
 font-size:.8rem;white-space:pre;pointer-events:none;box-shadow:0 2px 6px rgba(0,0,0,.2)}
+table.headline th,table.headline td{white-space:nowrap}table.headline td:not(:first-child){text-align:right}
+.takeaway{max-width:70rem}.legend{font-size:.8rem;color:#444;max-width:75rem}.legend dt{font-weight:600;display:inline}
+.legend dd{display:inline;margin:0 0 0 .3rem}.legend dd::after{content:"";display:block}
+details.more>summary{font-size:1.15rem;font-weight:600;margin:1.5rem 0 .5rem}
 .alarm{color:#b00020}tr.violation{background:#fde7e9}img{max-width:100%}details{margin:.3rem 0}summary{cursor:pointer}.count{color:#555;font-size:.85rem}
 """
 
@@ -120,12 +125,42 @@ def _filter_attrs(profile: str, scenes: str, threat: str) -> str:
     return f'data-filtered="1" data-profile="{_e(profile)}" data-scenes="{_e(scenes)}" data-threat="{_e(threat)}"'
 
 
+def _th(column: Column) -> str:
+    return f'<th title="{_e(column.tip)}">{_e(column.header)}</th>' if column.tip else f"<th>{_e(column.header)}</th>"
+
+
+def headline_html(entries: Sequence[Entry], study: Mapping[str, Any] | None = None) -> str:
+    """The first screen: per profile its takeaway (generated, tables.takeaways) and a table of the headline
+    columns only (tables.headline_columns), every header with its tooltip, then one legend of the columns."""
+    columns = headline_columns(study)
+    said = takeaways(entries, study)
+    parts = []
+    for profile in dict.fromkeys(e.profile for e in entries):
+        mine = [e for e in entries if e.profile == profile]
+        scenes = ", ".join(dict.fromkeys(e.scenes for e in mine))
+        lines = []
+        for e in mine:
+            tds = "".join(f'<td data-sort="{_e(text if value is None else repr(value))}">{_e(text)}</td>'
+                          for text, value in (c.cell(e, None) for c in columns))
+            lines.append(f"<tr>{tds}</tr>")
+        takeaway = said.get(profile)
+        parts.append(
+            f'<section class="profile" data-profile="{_e(profile)}"><h2>Profile {_e(profile)} '
+            f'<span class="count">(scenes {_e(scenes)}; {len(mine)} lenses)</span></h2>'
+            + (f'<p class="takeaway"><strong>Takeaway.</strong> {_e(takeaway)}</p>' if takeaway else "")
+            + f'<table class="headline sortable" data-profile="{_e(profile)}"><thead><tr>'
+            + "".join(_th(c) for c in columns) + "</tr></thead><tbody>" + "".join(lines) + "</tbody></table></section>")
+    legend = "".join(f"<dt>{_e(c.header)}</dt><dd>{_e(c.tip)}</dd>" for c in columns)
+    return "".join(parts) + f'<dl class="legend">{legend}</dl>'
+
+
 def tradeoff_table(entries: Sequence[Entry], study: Mapping[str, Any] | None = None) -> str:
     """The sortable trade-off table: the columns of the markdown table (`table_columns(study)`) plus
     the threat model, one line per entry and threat view."""
     columns = table_columns(study, entries)
-    head = "".join(f"<th>{_e(c.header)}</th>" for c in columns[:4]) + "<th>threat model</th>"
-    head += "".join(f"<th>{_e(c.header)}</th>" for c in columns[4:])
+    head = "".join(_th(c) for c in columns[:4])
+    head += '<th title="the attackers the privacy columns count: every one, or one threat model\'s">threat model</th>'
+    head += "".join(_th(c) for c in columns[4:])
     lines = []
     for e in entries:
         for threat, attacks in threat_views(e):
@@ -287,11 +322,19 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
         '<link rel="icon" href="data:,">', "<title>Privacy Lens Bench leaderboard</title>",
         f"<style>{_STYLE}</style></head><body>",
         "<h1>Privacy Lens Bench leaderboard</h1>",
-        "<p>Rendered by <code>python -m benchmark report</code> from <code>leaderboard/entries/*.json</code>; "
-        "mean ± standard deviation over the seeds listed, [95 % interval]. Ensemble = every attacker of the suite "
-        "for that lens, or of the chosen threat model, at once: a plate counts as read when any chain read it, a "
-        "scene at its best restorer; worst case = the strongest single attacker (ranked on the seeds every "
-        "attacker ran); attack gap = the ideal observer's ceiling minus the ensemble. Click a column header to sort.</p>",
+        f'<p class="convention"><strong>Intervals.</strong> {_e(CONVENTION)}</p>',
+        "<p>Which lens keeps most utility (mIoU, higher is better) for how much privacy (the plates the ensemble of "
+        "every attacker of the suite reads, lower is better)? A plate counts as read when any attacker read it; "
+        f"\"private\" below means under {100 * PRIVATE_LEVEL:g} % at the upper 95 % limit. Hover a column header "
+        "for what it shows; click it to sort.</p>",
+        headline_html(entries, study),
+        '<details class="more" id="more"><summary>Everything else: the full tables (every figure, filterable by '
+        "profile, scenes and threat model), ceiling violations, attack flags, interactive charts, the paper's "
+        "findings, samples and charts</summary>",
+        "<p>Ensemble = every attacker of the suite for that lens, or of the chosen threat model, at once: a plate "
+        "counts as read when any chain read it, a scene at its best restorer; worst case = the strongest single "
+        "attacker (ranked on the seeds every attacker ran); attack gap = the ideal observer's ceiling minus the "
+        "ensemble.</p>",
         f'<div class="filters">{filters}<span class="count" id="shown"></span></div>',
         "<h2>Utility against privacy</h2>", tradeoff_table(entries, study),
         "<h2>Ceiling violations</h2>", violations_html(violations),
@@ -299,7 +342,7 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
         f'<h2>Utility against privacy, interactive</h2><div class="charts">{"".join(svgs)}</div>',
         "<h2>The paper's findings on these entries</h2>", findings_html(entries),
         "<h2>Samples per lens</h2>", "".join(per_lens) or "<p>No published sample images.</p>",
-        f'<h2>Charts</h2><div class="charts">{static}</div>',
+        f'<h2>Charts</h2><div class="charts">{static}</div>', "</details>",
         '<div id="tip" role="tooltip"></div>', f"<script>{_SCRIPT}</script>", "</body></html>", ""])
 
 

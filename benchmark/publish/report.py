@@ -20,16 +20,17 @@ from benchmark.results.charts.tradeoff import write_tradeoff_chart
 from benchmark.results.entries import LEADERBOARD, Entry, display_order, load_entries, locked
 from benchmark.publish import board_files
 from benchmark.publish.page import write_page
-from benchmark.publish.tables import ensemble_summary, findings_table, flags_table, main_table, violations_table
+from benchmark.publish.tables import (CONVENTION, ensemble_summary, findings_table, flags_table, main_table,
+                                      takeaways, violations_table)
 from benchmark.results.attack_gap import CEILING_ALARM, GAP_ALARM, Flag, entry_flags
 from benchmark.results.observer.published import entry_violations, load_study
 
 log = logging.getLogger(__name__)
 
 INTRO = ("Rendered by `python -m benchmark report` from `leaderboard/entries/*.json` (written by "
-         "`python -m benchmark run ... --publish`); never edited by hand. Mean ± standard deviation over the seeds "
-         "listed, [95 % interval]. Privacy is the ensemble's, the per-unit worst case over every attacker of the suite "
-         "for that lens (benchmark.results.ensemble): a plate counts as read when any reader chain read it exactly "
+         "`python -m benchmark run ... --publish`); never edited by hand. Privacy is the ensemble's, the per-unit "
+         "worst case over every attacker of the suite for that lens (benchmark.results.ensemble): a plate counts as "
+         "read when any reader chain read it exactly "
          "(Wilson interval on the plates of every seed pooled), a scene counts at its best restorer (scene "
          "bootstrap); reference rows (the uncorrected `raw` image) are not attackers and stay out. Worst case = the "
          "strongest single attacker (ranked on the seeds every attacker ran, then shown over all of its seeds), "
@@ -108,7 +109,9 @@ def readme_text(entries: list[Entry], charts: list[Path], pictures: list[Path], 
     """The leaderboard README: tables, then the charts and the published pictures (paths relative)."""
     findings = findings_table(entries)
     summary = ensemble_summary(entries)
-    text = ["# Leaderboard", "", INTRO, "",
+    said = [f"**Takeaway ({profile}).** {line}" for profile, line in takeaways(entries, study).items()]
+    text = ["# Leaderboard", "", f"**Intervals.** {CONVENTION}", "", INTRO, "",
+            *[x for line in said for x in (line, "")],
             "The same tables, sortable and filterable by profile, scenes and threat model, with interactive "
             "charts: [index.html](index.html) (a self-contained page; open it from disk).", "",
             "## Utility against privacy", "", main_table(entries, study), "", *([summary, ""] if summary else []),

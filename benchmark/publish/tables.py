@@ -17,10 +17,11 @@ import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from benchmark.publish.findings import check_findings
+from benchmark.publish.findings import Finding, check_findings
 from benchmark.results.attack_gap import GAP_WIDTHS_PX, Flag, entry_gaps
+from benchmark.results import pooled
 from benchmark.results.ensemble import chain_accuracy, plate_ensemble, scene_ensemble
-from benchmark.results.entries import Entry, Stat
+from benchmark.results.entries import Entry
 from benchmark.results.markdown import md_cell
 from benchmark.results.observer.published import NOT_COMPUTED, study_record
 
@@ -28,71 +29,90 @@ from benchmark.results.observer.published import NOT_COMPUTED, study_record
 Cell = tuple[str, float | None]
 
 
-def pm(stat: Stat | None, digits: int = 3, pct: bool = False) -> str:
-    """"mean ± seed std" (the std left out when it is 0, e.g. one seed); "" for no value."""
-    if stat is None:
-        return ""
-    scale = 100.0 if pct else 1.0
-    text = f"{stat.mean * scale:.{digits}f}"
-    return text + (f" ± {stat.std * scale:.{digits}f}" if stat.std else "")
+CONVENTION = ("Every figure is pooled over the scenes or plates of all its seeds, x [low, high] being its pooled 95 % "
+              "interval (plates: Wilson; scenes: bootstrap within seeds), and the seed spread (standard deviation of "
+              "the per-seed figures, how much a re-trained lens or attacker moves) is its own column; a cell without "
+              "per-unit outcomes says so instead of an interval.")
 
 
 @dataclasses.dataclass(frozen=True)
 class Column:
-    """A trade-off table column: header and cell(entry, attacks) where `attacks` (None: all) limits
-    the worst case to some attackers (the web page's threat-model filter)."""
+    """A trade-off table column: header, cell(entry, attacks) where `attacks` (None: all) limits the
+    privacy figures to some attackers (the web page's threat-model filter), and what it shows (`tip`,
+    the web page's tooltip and legend)."""
 
     header: str
     cell: Callable[[Entry, set[str] | None], Cell]
+    tip: str = ""
 
 
 def _text(get: Callable[[Entry], str]) -> Callable[[Entry, set[str] | None], Cell]:
     return lambda e, attacks: (get(e), None)
 
 
+def _ci(found: pooled.Pooled | None, digits: int, scale: float = 1.0) -> Cell:
+    """"value [pooled 95 %]", or "value (no per-unit outcomes)"; "" for no value."""
+    return ("", None) if found is None else (found.text(digits, scale), found.value * scale)
+
+
+def _spread(found: pooled.Pooled | None, digits: int, scale: float = 1.0) -> Cell:
+    """The seed spread of a pooled figure ("" for one seed or no value)."""
+    if found is None or found.n_seeds < 2:
+        return "", None
+    return found.spread_text(digits, scale), found.seed_std * scale
+
+
 def _utility(name: str) -> Callable[[Entry, set[str] | None], Cell]:
-    def cell(e: Entry, attacks: set[str] | None) -> Cell:
-        stat = e.metric("utility", name)
-        return pm(stat), None if stat is None else stat.mean
-    return cell
+    return lambda e, attacks: _ci(pooled.utility(e, name), 3)
+
+
+def _miou_spread(e: Entry, attacks: set[str] | None) -> Cell:
+    return _spread(pooled.miou(e), 3)
 
 
 def _worst(name: str, kind: str, digits: int, pct: bool = False, named: bool = True
            ) -> Callable[[Entry, set[str] | None], Cell]:
+    """The strongest single attacker's figure over its own units and seeds, pooled ("value [95 %] (attack)")."""
     def cell(e: Entry, attacks: set[str] | None) -> Cell:
         found = e.worst_case(name, kind, attacks)
         if found is None:
             return "", None
-        stat, attack = found
-        return (f"{pm(stat, digits, pct)}{_pooled_interval(e, name, attack, attacks)} "
-                f"({attack}{_fewer_seeds(e, attack)})" if named else pm(stat, digits, pct)), stat.mean
+        attack = found[1]
+        figure = pooled.plates(e, {attack}) if name == "plate_acc" else pooled.chain_metric(e, attack, name)
+        text, value = _ci(figure, digits, 100.0 if pct else 1.0)
+        return (f"{text} ({attack}{_fewer_seeds(e, attack)})" if named else text), value
     return cell
 
 
-def _pooled_interval(e: Entry, name: str, attack: str, attacks: set[str] | None) -> str:
-    """" [low, high]": a plate chain's Wilson 95 % interval on its plates pooled over seeds (from its
-    per-plate units; "" without them or for another metric)."""
-    if name != "plate_acc":
-        return ""
-    ensemble = plate_ensemble(e.rows, attacks)
-    accuracy = None if ensemble is None else chain_accuracy(ensemble, attack)
-    return "" if accuracy is None else f" [{100 * accuracy.interval[0]:.1f}, {100 * accuracy.interval[1]:.1f}]"
-
-
 def _ensemble_plates(e: Entry, attacks: set[str] | None) -> Cell:
-    """The ensemble's plate accuracy: mean ± seed sd [Wilson 95 % on the pooled plates] (chains)."""
+    """The ensemble's plate accuracy: pooled plates read / scored [Wilson 95 %] (chains)."""
     ensemble = plate_ensemble(e.rows, attacks)
     if ensemble is None:
         return ("no per-plate outcomes" if e.worst_case("plate_acc", "reader", attacks) else ""), None
-    return f"{ensemble.accuracy.text()} ({len(ensemble.chains)} chains)", ensemble.accuracy.value
+    found = pooled.plates(e, attacks)
+    assert found is not None
+    return f"{found.text(1, 100.0)} ({len(ensemble.chains)} chains)", 100 * found.value
+
+
+def _ensemble_plates_spread(e: Entry, attacks: set[str] | None) -> Cell:
+    return _spread(pooled.plates(e, attacks) if plate_ensemble(e.rows, attacks) else None, 1, 100.0)
 
 
 def _ensemble_psnr(e: Entry, attacks: set[str] | None) -> Cell:
-    """Mean over scenes of each scene's best restorer: mean ± seed sd [scene bootstrap 95 %] (restorers)."""
+    """Mean over scenes of each scene's best restorer: mean [scene bootstrap 95 %] (restorers)."""
     ensemble = scene_ensemble(e.rows, "psnr_db", attacks)
     if ensemble is None:
         return ("no per-scene outcomes" if e.worst_case("psnr_db", "restorer", attacks) else ""), None
-    return f"{ensemble.text()} ({len(ensemble.restorers)} restorers)", ensemble.mean
+    low, high = ensemble.interval
+    return (f"{ensemble.mean:.2f} [{low:.2f}, {high:.2f}] ({len(ensemble.restorers)} restorers)",
+            ensemble.mean)
+
+
+def _ensemble_psnr_spread(e: Entry, attacks: set[str] | None) -> Cell:
+    ensemble = scene_ensemble(e.rows, "psnr_db", attacks)
+    if ensemble is None or len(ensemble.seed_values) < 2:
+        return "", None
+    return f"{ensemble.seed_std:.2f}", ensemble.seed_std
 
 
 def _fewer_seeds(e: Entry, attack: str) -> str:
@@ -133,23 +153,42 @@ def _bound_limited(e: Entry, attacks: set[str] | None) -> Cell:
 
 ENSEMBLE_PLATES = "ensemble plate acc % [95 %] (any chain reads it)"
 ENSEMBLE_PSNR = "ensemble PSNR dB [95 %] (per-scene best restorer)"
+_PLATES_TIP = ("plates read by the ensemble (a plate counts as read when any reader chain of the suite read it "
+               "exactly), % of the plates of every seed pooled, [Wilson 95 %]; lower = more private")
+_MIOU_TIP = ("utility: mean intersection over union of the segmentation net on the sensor images, mean over seeds of "
+             "each seed's mIoU pooled over its scenes, [scene bootstrap 95 %]; higher = more useful")
+_SEEDS_TIP = "the seeds (independent lens and attacker trainings) the figures pool"
 
 MAIN_COLUMNS = (
-    Column("lens", _text(lambda e: e.lens)),
-    Column("profile", _text(lambda e: e.profile)),
-    Column("scenes", _text(lambda e: e.scenes)),
-    Column("seeds", _text(lambda e: ",".join(map(str, e.seeds)))),
-    Column("mIoU", _utility("miou")),
-    Column("mA", _utility("mean_acc")),
-    Column("OA", _utility("overall_acc")),
-    Column(ENSEMBLE_PLATES, _ensemble_plates),
-    Column("worst plate acc % (chain)", _worst("plate_acc", "reader", 1, pct=True)),
-    Column(ENSEMBLE_PSNR, _ensemble_psnr),
-    Column("worst PSNR dB (attacker)", _worst("psnr_db", "restorer", 2)),
-    Column("worst SSIM", _worst("ssim", "restorer", 3, named=False)),
-    Column("W_5% px (Fano, T=1)", _single("bound", "bound_width_eps_t1", ".0f")),
-    Column("lens img/s", _single("lens", "images_per_s", ".1f")),
-    Column("bound-limited", _bound_limited),
+    Column("lens", _text(lambda e: e.lens), "the lens (python -m benchmark list describes each)"),
+    Column("profile", _text(lambda e: e.profile), "the run profile: scene and network sizes, budgets"),
+    Column("scenes", _text(lambda e: e.scenes), "the scene set"),
+    Column("seeds", _text(lambda e: ",".join(map(str, e.seeds))), _SEEDS_TIP),
+    Column("mIoU [95 %]", _utility("miou"), _MIOU_TIP),
+    Column("mIoU seed sd", _miou_spread, "standard deviation of the per-seed mIoU (seed spread)"),
+    Column("mA", _utility("mean_acc"), "mean class accuracy, mean over seeds (rows keep no per-scene outcomes of it)"),
+    Column("OA", _utility("overall_acc"), "overall pixel accuracy, mean over seeds (rows keep no per-scene outcomes of "
+                                          "it)"),
+    Column(ENSEMBLE_PLATES, _ensemble_plates, _PLATES_TIP + "; (chains that joined)"),
+    Column("ensemble plate acc seed sd pt", _ensemble_plates_spread,
+           "standard deviation of the ensemble's per-seed plate accuracy, in points (seed spread)"),
+    Column("worst plate acc % [95 %] (chain)", _worst("plate_acc", "reader", 1, pct=True),
+           "the strongest single reader chain's own plate accuracy, its plates pooled over its seeds [Wilson 95 %]"),
+    Column(ENSEMBLE_PSNR, _ensemble_psnr, "mean over scenes of each scene's best restorer's PSNR, mean over seeds "
+                                          "[scene bootstrap 95 %]; (restorers that joined)"),
+    Column("ensemble PSNR seed sd dB", _ensemble_psnr_spread,
+           "standard deviation of the ensemble's per-seed PSNR (seed spread)"),
+    Column("worst PSNR dB [95 %] (attacker)", _worst("psnr_db", "restorer", 2),
+           "the strongest single restorer's PSNR over its scenes and seeds [scene bootstrap 95 %]"),
+    Column("worst SSIM [95 %]", _worst("ssim", "restorer", 3, named=False),
+           "the strongest single restorer's SSIM over its scenes and seeds [scene bootstrap 95 %]"),
+    Column("W_5% px (Fano, T=1)", _single("bound", "bound_width_eps_t1", ".0f"),
+           "the plate width below which the Gaussian information bound (Fano) certifies that no attacker reads "
+           "more than 5 % of plates from one frame (a deterministic bound: no interval)"),
+    Column("lens img/s", _single("lens", "images_per_s", ".1f"), "images the lens simulation renders per second, "
+                                                                   "mean over seeds (a speed: no interval)"),
+    Column("bound-limited", _bound_limited, "whether a trained mask ended on a coefficient bound, in how many seeds "
+                                            "and which terms"),
 )
 _FANO = next(i for i, c in enumerate(MAIN_COLUMNS) if c.header.startswith("W_5% px (Fano"))
 
@@ -165,13 +204,24 @@ def _observer(study: Mapping[str, Any] | None, frames: str, key: str, scale: flo
 
 def observer_columns(study: Mapping[str, Any] | None) -> tuple[Column, ...]:
     """The ideal observer's plate ceiling at 32 px (T = 1) and its certified widths W_5% (T = 1, 30)."""
-    return (Column("ceiling % at 32 px (ideal observer, T=1)", _observer(study, "t1", "plate_ceiling_w32", 100, ".1f")),
-            Column("W_5% px (ideal observer, T=1)", _observer(study, "t1", "w5_plate_px", 1, ".0f")),
-            Column("W_5% px (ideal observer, T=30)", _observer(study, "t30", "w5_plate_px", 1, ".0f")))
+    where = "; \"not computed\" where the study did not use the entry's own lens spec"
+    return (Column("ceiling % at 32 px (ideal observer, T=1)", _observer(study, "t1", "plate_ceiling_w32", 100, ".1f"),
+                   "the most any attacker can read of 32 px plates from one frame (the Bayesian ideal observer)" + where),
+            Column("W_5% px (ideal observer, T=1)", _observer(study, "t1", "w5_plate_px", 1, ".0f"),
+                   "the widest plate the ideal observer reads at most 5 % of, one frame" + where),
+            Column("W_5% px (ideal observer, T=30)", _observer(study, "t30", "w5_plate_px", 1, ".0f"),
+                   "the same from 30 frames" + where))
 
 
 def gap_header(width_px: int) -> str:
     return f"attack gap pt at {width_px} px (ceiling - ensemble)"
+
+
+def gap_tip(width_px: int) -> str:
+    return (f"the ideal observer's plate ceiling at {width_px} px minus the ensemble's plate accuracy there, in points "
+            "[95 %: the ceiling's Monte-Carlo interval against the ensemble's Wilson interval]; large = the suite's "
+            "attackers are far from the best possible reader, so privacy is overstated; \"not computed\" where the "
+            "ideal-observer study did not use the entry's own lens spec")
 
 
 def _gap(study: Mapping[str, Any] | None, width_px: int) -> Callable[[Entry, set[str] | None], Cell]:
@@ -189,7 +239,7 @@ def gap_columns(study: Mapping[str, Any] | None, entries: Sequence[Entry] = ()) 
     """The attack gap at GAP_WIDTHS_PX: 32 px always (every readable plate where widths are not
     recorded), 16 and 64 px only where some entry has plates binned by width there."""
     have = {g.low_px for e in entries for g in entry_gaps(e, study)}
-    return tuple(Column(gap_header(w), _gap(study, w)) for w in GAP_WIDTHS_PX if w == 32 or w in have)
+    return tuple(Column(gap_header(w), _gap(study, w), gap_tip(w)) for w in GAP_WIDTHS_PX if w == 32 or w in have)
 
 
 def table_columns(study: Mapping[str, Any] | None, entries: Sequence[Entry] = ()) -> tuple[Column, ...]:
@@ -267,10 +317,25 @@ FINDINGS_HEAD = ("profile", "finding", "a", "b", "a's figure", "b's figure", "pa
                  "n", "verdict")
 
 
+def _finding_figure(entries: Sequence[Entry], f: Finding, side: str) -> str:
+    """A finding's figure of one side as the trade-off table shows it: pooled, "value [95 %] (attack)";
+    the finding's own text where the entry is not unique in its profile (several scene sets)."""
+    lens, attack = (f.lens_a, f.attack_a) if side == "a" else (f.lens_b, f.attack_b)
+    mine = [e for e in entries if e.lens == lens and e.profile == f.profile]
+    if len(mine) != 1 or attack is None or f.measure not in ("miou", "psnr_db", "plate_acc"):
+        return f.figure_text(side)
+    e = mine[0]
+    if f.measure == "miou":
+        return _ci(pooled.miou(e), 3)[0]
+    found = pooled.chain_metric(e, attack, "psnr_db") if f.measure == "psnr_db" else pooled.chain_plates(e, attack)
+    text = _ci(found, 2 if f.measure == "psnr_db" else 1, 1.0 if f.measure == "psnr_db" else 100.0)[0]
+    return f"{text} ({attack})" if text else f.figure_text(side)
+
+
 def findings_lines(entries: Sequence[Entry]) -> list[list[str]]:
     """One line of cells (FINDINGS_HEAD) per finding checked on the entries (benchmark.publish.findings)."""
     return [[f.profile, f.claim + (" (suite check)" if f.source == "suite" else ""), f.lens_a, f.lens_b,
-             f.figure_text("a"), f.figure_text("b"), f.difference_text(), f.p_text(),
+             _finding_figure(entries, f, "a"), _finding_figure(entries, f, "b"), f.difference_text(), f.p_text(),
              "" if f.comparison is None else f.comparison.method, "" if f.comparison is None else str(f.comparison.n),
              f.decision_text()] for f in check_findings(entries)]
 
@@ -282,17 +347,97 @@ def findings_table(entries: Sequence[Entry]) -> str:
     return _markdown(FINDINGS_HEAD, lines) if lines else ""
 
 
+ATTACKER_HEAD = ("lens", "attack", "seeds", "threat model", "PSNR dB [95 %]", "SSIM [95 %]", "plate acc % [95 %]",
+                 "seed sd (PSNR dB or plate acc pt)", "plate CER", "fit s", "img/s")
+
+
 def attacker_table(entries: Sequence[Entry]) -> str:
-    """Every attack chain of every entry with its own figures (markdown)."""
+    """Every attack chain of every entry with its own figures, each pooled over its units and seeds with
+    its 95 % interval, the seed spread of its main figure (PSNR, else plate accuracy) apart (markdown)."""
     lines = []
     for e in entries:
         for chain in e.chains():
             if chain.kind in ("lens", "utility", "bound"):
                 continue
             m = chain.metrics.get
-            fit, speed = m("fit_s"), m("images_per_s")
+            psnr, plates = pooled.chain_metric(e, chain.attack, "psnr_db"), pooled.chain_plates(e, chain.attack)
+            spread = _spread(psnr, 2) if psnr is not None else _spread(plates, 1, 100.0)
+            fit, speed, cer = m("fit_s"), m("images_per_s"), m("plate_cer")
             lines.append([e.lens, chain.attack, ",".join(map(str, chain.seeds)), chain.threat_model or "",
-                          pm(m("psnr_db"), 2), pm(m("ssim")), pm(m("plate_acc"), 1, pct=True), pm(m("plate_cer")),
+                          _ci(psnr, 2)[0], _ci(pooled.chain_metric(e, chain.attack, "ssim"), 3)[0],
+                          _ci(plates, 1, 100.0)[0], spread[0],
+                          f"{cer.mean:.3f} (no per-plate CER)" if cer else "",
                           f"{fit.mean:.1f}" if fit else "", f"{speed.mean:.2f}" if speed else ""])
-    return _markdown(["lens", "attack", "seeds", "threat model", "PSNR dB", "SSIM", "plate acc %", "plate CER",
-                      "fit s", "img/s"], lines)
+    return _markdown(list(ATTACKER_HEAD), lines)
+
+
+# The privacy level of the takeaway: a lens counts as private when the upper 95 % limit of the plates its
+# ensemble reads is below it.
+PRIVATE_LEVEL = 0.05
+
+
+def _headline_plates(e: Entry, attacks: set[str] | None) -> Cell:
+    if plate_ensemble(e.rows, attacks) is None:
+        return ("no per-plate outcomes" if e.worst_case("plate_acc", "reader", attacks) else ""), None
+    return _ci(pooled.plates(e, attacks), 1, 100.0)
+
+
+def headline_columns(study: Mapping[str, Any] | None) -> tuple[Column, ...]:
+    """The web page's first table: lens, utility, the ensemble's privacy, the ceiling gap and the seeds."""
+    return (Column("lens", _text(lambda e: e.lens), "the lens (python -m benchmark list describes each)"),
+            Column("mIoU [95 %]", _utility("miou"), _MIOU_TIP),
+            Column("plates read % [95 %]", _headline_plates, _PLATES_TIP),
+            Column("ceiling gap pt [95 %]", _gap(study, 32), gap_tip(32)),
+            Column("seeds", _text(lambda e: ",".join(map(str, e.seeds))), _SEEDS_TIP))
+
+
+def _pct(interval: tuple[float, float]) -> str:
+    return f"[{100 * interval[0]:.1f}, {100 * interval[1]:.1f}]"
+
+
+def takeaways(entries: Sequence[Entry], study: Mapping[str, Any] | None = None) -> dict[str, str]:
+    """Per profile, one sentence generated from its entries answering "which lens keeps most utility for how
+    much privacy": the lens with the highest mIoU among those whose ensemble reads under PRIVATE_LEVEL of
+    plates at the upper 95 % limit (or, with none, the highest mIoU overall), the Pareto front on mIoU
+    against ensemble plate accuracy (pooled), and how many lenses' ceiling gap is over GAP_ALARM."""
+    from benchmark.results.attack_gap import GAP_ALARM
+    from benchmark.results.charts.tradeoff import pareto_front
+
+    out = {}
+    for profile in dict.fromkeys(e.profile for e in entries):
+        scored = []
+        for e in entries:
+            if e.profile != profile or plate_ensemble(e.rows) is None:
+                continue
+            utility, plates = pooled.miou(e), pooled.plates(e)
+            if utility is not None and plates is not None and plates.interval is not None:
+                scored.append((e, utility, plates))
+        if not scored:
+            out[profile] = ("No entry of this profile carries per-plate outcomes with its plate accuracy, so no "
+                            "lens can be said to keep most utility for its privacy.")
+            continue
+        private = [x for x in scored if x[2].interval[1] < PRIVATE_LEVEL]  # type: ignore[index]
+        level = f"{100 * PRIVATE_LEVEL:g} %"
+        if private:
+            e, u, p = max(private, key=lambda x: x[1].value)
+            head = (f"of the {len(private)} of {len(scored)} lenses whose ensemble reads under {level} of plates "
+                    f"(upper 95 % limit), {e.lens} keeps the most utility: mIoU {u.text(3)}, plates read "
+                    f"{100 * p.value:.1f} % {_pct(p.interval)}")  # type: ignore[arg-type]
+        else:
+            e, u, p = max(scored, key=lambda x: x[1].value)
+            widest = max(x[2].interval[1] for x in scored)  # type: ignore[index]
+            head = (f"none of the {len(scored)} lenses is shown to read under {level} of plates (upper 95 % limits "
+                    f"up to {100 * widest:.1f} %: too few plates); the most utility: {e.lens}, mIoU {u.text(3)}, "
+                    f"plates read {100 * p.value:.1f} % {_pct(p.interval)}")  # type: ignore[arg-type]
+        front = [scored[i] for i in pareto_front([(x[2].value, x[1].value) for x in scored])]
+        head += ("; Pareto front (each lens more private than the next, the next more useful): "
+                 + ", ".join(f"{x[0].lens} ({x[1].value:.3f}, {100 * x[2].value:.1f} %)" for x in front))
+        gaps = [g for x in scored for g in entry_gaps(x[0], study) if g.low_px == 32]
+        if gaps:
+            over = sum(g.gap > GAP_ALARM for g in gaps)
+            head += (f"; the ceiling gap is over {100 * GAP_ALARM:.0f} points for {over} of the {len(gaps)} lenses the "
+                     "ideal-observer study covers" + (": the suite's attackers read far fewer plates than the best "
+                                                      "possible reader, so privacy is overstated"
+                                                      if over else ""))
+        out[profile] = head[0].upper() + head[1:] + "."
+    return out

@@ -12,7 +12,9 @@ from matplotlib.figure import Figure
 
 from benchmark.results.charts import new_figure, save_figure
 from benchmark.results.charts.labels import LABEL_FONT_PT, label_points, line_height_in
-from benchmark.results.entries import Entry, Stat
+from benchmark.results import pooled
+from benchmark.results.entries import Entry
+from benchmark.results.pooled import Pooled
 
 _MARKERS = "osD^v<>pP*Xh"
 # Panel geometry in inches: the label column sits right of the axes, outside them.
@@ -26,8 +28,8 @@ _MIN_X_SPAN, _MIN_Y_SPAN = 2.0, 0.02
 class TradeoffPoint:
     """One lens of one profile: utility (mIoU) against its strongest attacker's privacy figure.
 
-    ``*_low``/``*_high`` bound the error bar: the 95 % interval where the rows carry one, else
-    mean -/+ the seed std (``error`` says which)."""
+    ``*_low``/``*_high`` bound the error bar: the pooled 95 % interval (benchmark.results.pooled), or
+    no bar where the rows carry no per-unit outcomes (``error`` says which)."""
 
     lens: str
     profile: str
@@ -42,23 +44,31 @@ class TradeoffPoint:
     error: str
 
 
-def _bounds(stat: Stat, scale: float) -> tuple[float, float, str]:
-    if stat.interval is not None:
-        return stat.interval[0] * scale, stat.interval[1] * scale, "95 % interval"
-    return (stat.mean - stat.std) * scale, (stat.mean + stat.std) * scale, "seed std"
+def _bounds(found: Pooled, scale: float) -> tuple[float, float, str]:
+    """The pooled 95 % interval (benchmark.results.pooled), or no bar where there are no per-unit outcomes."""
+    if found.interval is not None:
+        return found.interval[0] * scale, found.interval[1] * scale, "pooled 95 % interval"
+    return found.value * scale, found.value * scale, f"no bar: no {found.missing}"
 
 
 def tradeoff_points(entries: Sequence[Entry], privacy: str, kind: str, scale: float = 1.0) -> list[TradeoffPoint]:
     """Points of every entry with a utility figure and an attacker figure `privacy` of `kind`
-    ("restorer" or "reader"), scaled by `scale` (100 for a fraction shown in %)."""
+    ("restorer" or "reader"), scaled by `scale` (100 for a fraction shown in %); each figure pooled over
+    its units and seeds with its pooled 95 % interval as the bar (benchmark.results.pooled)."""
     points = []
     for e in entries:
-        util, worst = e.metric("utility", "miou"), e.worst_case(privacy, kind)
-        if util is None or worst is None:
+        found = e.worst_case(privacy, kind)
+        util = pooled.miou(e)
+        if util is None or found is None:
             continue
-        (stat, attacker), (u_lo, u_hi, u_err), (p_lo, p_hi, p_err) = worst, _bounds(util, 1.0), _bounds(worst[0], scale)
-        points.append(TradeoffPoint(e.lens, e.profile, e.scenes, attacker, stat.mean * scale, p_lo, p_hi,
-                                    util.mean, u_lo, u_hi, u_err if u_err == p_err else f"{p_err} / {u_err}"))
+        attacker = found[1]
+        figure = pooled.chain_plates(e, attacker) if privacy == "plate_acc" else pooled.chain_metric(e, attacker,
+                                                                                                      privacy)
+        if figure is None:
+            continue
+        (u_lo, u_hi, u_err), (p_lo, p_hi, p_err) = _bounds(util, 1.0), _bounds(figure, scale)
+        points.append(TradeoffPoint(e.lens, e.profile, e.scenes, attacker, figure.value * scale, p_lo, p_hi,
+                                    util.value, u_lo, u_hi, u_err if u_err == p_err else f"{p_err} / {u_err}"))
     return points
 
 
