@@ -9,6 +9,7 @@ from benchmark.codesign.schemes import SCHEMES
 from benchmark.codesign.trainer import CoDesign
 from benchmark.results.entries import make_entry
 from benchmark.publish.tables import main_table
+from benchmark.store.cache import seal
 from benchmark.store.profiles import get_profile
 from benchmark.runner.rows import training_facts
 from benchmark.runner.pictures import training_curves
@@ -61,6 +62,7 @@ def test_training_curves_are_found_where_the_trainer_puts_them(tmp_path):
     run = CoDesign(load_spec(START_SPEC), SCHEMES["gp"], get_profile("smoke"), 0, "cpu", tmp_path / "cache")
     run.directory.mkdir(parents=True)
     (run.directory / "curves.png").write_bytes(b"\x89PNG fake")
+    seal(run.directory / "curves.png")  # the trainer seals what it writes; an unsealed chart is not copied
     # The record as a loaded run carries it: through JSON (tuples become lists).
     record = json.loads(json.dumps({"name": run.name, "config": run.config}))
     lens = types.SimpleNamespace(name="gp", training_record=record)
