@@ -50,6 +50,14 @@ def record(folder: Path, task: Task, cfg: RunConfig, wall_s: float) -> None:
     atomic_write_text(Path(folder) / COST_FILE, json.dumps(measured, indent=1) + "\n")
 
 
+def recorded(folder: Path) -> float | None:
+    """The wall time (s) recorded for the task whose result folder is `folder`, or None."""
+    try:
+        return float(json.loads((Path(folder) / COST_FILE).read_text())["wall_s"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def measurements(cache_dir: Path) -> list[dict[str, Any]]:
     """Every task cost recorded in the cache (`<cache>/tasks/<run>/<task>/cost.json`); unreadable ones skipped."""
     found = []
