@@ -1,6 +1,7 @@
 """Ship a lens-independent trained attacker's weights in the package: ``python -m benchmark pretrain-attacker``.
 
-Only ``nafnet-generic`` qualifies (its training knows no lens, see ``attacks.nafnet_generic``). The
+Two qualify: ``learned-reader``'s pre-training on sharp plates (``ship_reader``; every lens's fit
+starts from it) and ``nafnet-generic`` (its training knows no lens, see ``attacks.nafnet_generic``). The
 command fits it exactly as a run does (the profile's budget, the TRAIN crops of the seed; loaded from
 the cache when a run already trained it), then writes ``attacks/weights/nafnet-generic-<profile>-s<seed>
 .safetensors`` and its provenance: the cache key the attacker will look it up by, the commit, the
@@ -22,6 +23,8 @@ from safetensors.torch import save as save_safetensors
 import lenses
 from attacks.degradations import degrade
 from attacks.gray_world import gray_world_balance
+from attacks.learned_reader import LearnedReader, pack_weights, pretrain, pretrained_key
+from attacks.plates.plate_render import PLATE_FORMAT
 from attacks.nafnet_generic import NafnetGeneric
 from attacks.restorer_training import collect_pairs
 from attacks.shipped_weights import write_shipped
@@ -58,8 +61,28 @@ def check_scores(attacker: NafnetGeneric, ctx: Any) -> dict[str, float]:
             "psnr_out_db": float(psnr(restored, sharp).mean())}
 
 
+def ship_reader(args: argparse.Namespace) -> int:
+    """Pre-train ``learned-reader`` on sharp plates (seeded; the profile plays no part) and ship it
+    with its held-out curve, which ``tests/attacks/test_learned_reader.py`` checks the weights against."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(args.seed)
+        net = LearnedReader.build(PLATE_FORMAT)
+    curve = pretrain(net, PLATE_FORMAT, args.seed)
+    made = {"commit": git_commit(), "command": f"python -m benchmark pretrain-attacker learned-reader --seed {args.seed}",
+            "seed": args.seed, "fit_s": curve.seconds, "threads": torch.get_num_threads(),
+            "packages": package_versions(), "curve": curve.to_dict()}
+    path = write_shipped(f"learned-reader-sharp-s{args.seed}", LearnedReader.name, pretrained_key(PLATE_FORMAT, args.seed),
+                         pack_weights(net, curve), made, args.out)
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB) and its provenance; held-out exact-plate accuracy "
+          + ", ".join(f"{w} px {a:.2f}" for w, a in curve.per_width[-1].items())
+          + f" after {curve.steps[-1]} steps ({curve.stopped}{', still rising' if curve.still_rising else ''})")
+    return 0
+
+
 def main(args: argparse.Namespace) -> int:
     """`python -m benchmark pretrain-attacker` (arguments from `benchmark.cli`): fit or load, then ship."""
+    if args.attacker == "learned-reader":
+        return ship_reader(args)
     profile = get_profile(args.profile)
     commit = git_commit()
     ctx = generic_context(profile, args.seed, cache_root())

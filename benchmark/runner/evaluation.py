@@ -29,7 +29,7 @@ from benchmark.results.plate_scoring import PlateOutcome, readable, score_scene,
 from benchmark.runner.rows import RowBuilder, plate_units, scene_units
 from benchmark.runner.config import RunConfig
 from benchmark.scenes import Scene
-from benchmark.results.schema import Row, RowError, chain_name
+from benchmark.results.schema import FIT_STILL_RISING, Row, RowError, chain_name
 from benchmark.runner.sensing import batches
 
 log = logging.getLogger(__name__)
@@ -350,6 +350,14 @@ class ReadyReader:
     reader: attacks.Reader
     fit_error: RowError | None
     described: dict = field(default_factory=dict)
+    notes: dict[str, str] = field(default_factory=dict)  # what its fit says of itself (`fit_notes`)
+
+
+def fit_notes(described: object) -> dict[str, str]:
+    """The row notes a fitted attacker's describe() gives: ``FIT_STILL_RISING`` ("true" / "false")
+    when it says whether its fit stopped while its held-out score was still improving."""
+    rising = described.get(FIT_STILL_RISING) if isinstance(described, dict) else None
+    return {FIT_STILL_RISING: "true" if rising else "false"} if isinstance(rising, bool) else {}
 
 
 def fit_readers(target: Target, readers: Sequence[attacks.Reader], cfg: RunConfig) -> list[ReadyReader]:
@@ -367,7 +375,12 @@ def fit_readers(target: Target, readers: Sequence[attacks.Reader], cfg: RunConfi
             continue
         error = reason if isinstance(reason, RowError) else attempt(reader.name, "fit", lambda: reader.fit(ctx),
                                                                      cfg.budget_s)
-        ready.append(ReadyReader(reader, error if isinstance(error, RowError) else None, described))
+        if isinstance(error, RowError):
+            ready.append(ReadyReader(reader, error, described))
+            continue
+        # The settings keep the description made before the fit; the fit's verdict on itself goes in the notes.
+        after = describe(reader)
+        ready.append(ReadyReader(reader, after if isinstance(after, RowError) else None, described, fit_notes(after)))
     return ready
 
 
@@ -406,7 +419,7 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
     threat = reader.threat_model if restorer is None else attacks.ThreatModel.strongest(
         reader.threat_model, out.threat_models[restorer])
     row = rows.row(kind, {**summarise(outcomes), **timing}, attack=chain, restorer=restorer, reader=reader.name,
-                   threat_model=threat.value, settings=settings)
+                   threat_model=threat.value, settings=settings, notes=dict(ready.notes))
     plate_intervals(row, outcomes)
     row.set_units(plate_units(outcomes))
     chain_rows.append(row)

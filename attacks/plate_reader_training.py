@@ -1,0 +1,162 @@
+"""Training of the learned plate reader (``learned-reader``): budgets, held-out curve, early stop.
+
+Recipe: cross-entropy per character slot (label smoothing 0.05), AdamW (weight decay 1e-4) warmed up
+over the first tenth of the budget's steps to ``lr``, then a cosine decay, batches of simulated plates
+(``attacks.plates.plate_sim``) of one width band each, the bands drawn log-uniform over the budget's
+width range. Every ``eval_every`` steps the reader is scored on a fixed held-out set (plates of
+each width bin of ``EVAL_WIDTHS_PX`` that fits the range, the true box, no jitter); training stops
+when the mean exact-plate accuracy over the bins has not risen by ``min_gain`` over the last
+``patience`` evaluations (it has flattened) or at the budget's last step. A fit stopped by the
+budget while its last ``patience`` evaluations still gained ``min_gain`` is flagged
+``still_rising``: a privacy figure from it is an upper bound on what a longer fit would leave.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+from tqdm.auto import tqdm
+
+from attacks.networks.plate_cnn import PlateCNN
+from attacks.plates.plate_sim import PlateBatch, simulate_plates
+
+__all__ = ["EVAL_WIDTHS_PX", "FitCurve", "ReaderBudget", "held_out_set", "plate_accuracy", "train_reader"]
+
+log = logging.getLogger(__name__)
+
+EVAL_WIDTHS_PX: tuple[int, ...] = (8, 12, 16, 24, 32, 48, 64, 96, 128, 192)
+"""Width bins (px) of the held-out curve: the bins the leaderboard scores plate accuracy in."""
+
+Camera = Callable[[Tensor, torch.Generator], Tensor]
+
+
+@dataclasses.dataclass(frozen=True)
+class ReaderBudget:
+    """Steps and sizes of one fit (pre-training or fine-tuning on a lens).
+
+    Attributes:
+        max_steps: Optimiser steps at most (the fit may stop earlier, when it has flattened).
+        batch_size: Plates per step.
+        lr: Peak learning rate of the one-cycle schedule.
+        widths_px: (low, high) range of the training plates' widths, pixels.
+        eval_every: Steps between held-out evaluations.
+        eval_plates: Held-out plates per width bin.
+        patience: Evaluations without a gain of ``min_gain`` before the fit stops.
+        min_gain: The gain in mean held-out accuracy (a fraction) that counts as still improving.
+    """
+
+    max_steps: int
+    batch_size: int
+    lr: float
+    widths_px: tuple[float, float]
+    eval_every: int
+    eval_plates: int
+    patience: int
+    min_gain: float = 0.01
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclasses.dataclass
+class FitCurve:
+    """Held-out accuracy during a fit: ``steps[i]`` -> ``accuracy[i]`` (mean over the bins) and
+    ``per_width[i]`` ({width px: accuracy}); why it stopped; whether it was still rising."""
+
+    steps: list[int]
+    accuracy: list[float]
+    per_width: list[dict[int, float]]
+    stopped: str
+    still_rising: bool
+    seconds: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**dataclasses.asdict(self), "per_width": [{str(k): v for k, v in d.items()} for d in self.per_width]}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> FitCurve:
+        return cls(list(d["steps"]), list(d["accuracy"]), [{int(k): float(v) for k, v in p.items()} for p in d["per_width"]],
+                   str(d["stopped"]), bool(d["still_rising"]), float(d["seconds"]))
+
+
+def held_out_set(camera: Camera | None, budget: ReaderBudget, spread_px: float, psf_half_px: int, fmt: str,
+                 seed: int) -> dict[int, PlateBatch]:
+    """The fixed held-out plates: ``budget.eval_plates`` per width bin of ``EVAL_WIDTHS_PX`` inside
+    the budget's range, true boxes, drawn from ``seed`` (never the training draws)."""
+    low, high = budget.widths_px
+    rng, generator = np.random.default_rng([seed, 1]), torch.Generator().manual_seed(seed + 7919)
+    return {w: simulate_plates(camera, budget.eval_plates, (w, w), rng, generator, spread_px, fmt, psf_half_px,
+                               jitter=False)
+            for w in EVAL_WIDTHS_PX if low <= w <= high}
+
+
+def plate_accuracy(net: nn.Module, batch: PlateBatch) -> float:
+    """The share of ``batch``'s plates whose every slot ``net`` reads right (exact plate)."""
+    was_training = net.training
+    net.eval()
+    with torch.no_grad():
+        logits = net(batch.crops)
+    net.train(was_training)
+    predicted = torch.stack([slot.argmax(dim=1) for slot in logits], dim=1)
+    return float((predicted == batch.labels).all(dim=1).float().mean())
+
+
+def _loss(logits: list[Tensor], labels: Tensor, criterion: nn.Module) -> Tensor:
+    return sum((criterion(slot, labels[:, i]) for i, slot in enumerate(logits)), torch.zeros(())) / len(logits)
+
+
+def train_reader(net: PlateCNN, cameras: list[Camera | None], budget: ReaderBudget, spread_px: float,
+                 psf_half_px: int, fmt: str, seed: int, held_out: dict[int, PlateBatch]) -> FitCurve:
+    """Train ``net`` in place on plates through ``cameras`` (taken in turn, one per batch), stopping
+    where the held-out accuracy flattens (module docstring). Deterministic for a seed and thread count."""
+    rng, generator = np.random.default_rng([seed, 0]), torch.Generator().manual_seed(seed)
+    optimizer = torch.optim.AdamW(net.parameters(), lr=budget.lr, weight_decay=1e-4)
+    warmup, total = max(1, budget.max_steps // 10), max(budget.max_steps, 1)
+    schedule = torch.optim.lr_scheduler.LambdaLR(
+        optimizer, lambda s: min(1.0, (s + 1) / warmup) * 0.5 * (1.0 + math.cos(math.pi * min(s, total) / total)))
+    criterion = nn.CrossEntropyLoss(label_smoothing=0.05)
+    curve = FitCurve([], [], [], "budget", False, 0.0)
+    t0 = time.perf_counter()
+    net.train()
+    bar = tqdm(range(budget.max_steps), desc="plate reader fit", unit="step", leave=False)
+    for step in bar:
+        batch = simulate_plates(cameras[step % len(cameras)], budget.batch_size, budget.widths_px, rng, generator,
+                                spread_px, fmt, psf_half_px)
+        loss = _loss(net(batch.crops), batch.labels, criterion)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+        schedule.step()
+        if (step + 1) % budget.eval_every == 0 or step + 1 == budget.max_steps:
+            per_width = {w: plate_accuracy(net, b) for w, b in held_out.items()}
+            curve.steps.append(step + 1)
+            curve.per_width.append(per_width)
+            curve.accuracy.append(float(np.mean(list(per_width.values()))) if per_width else 0.0)
+            bar.set_postfix(held_out=f"{curve.accuracy[-1]:.3f}")
+            log.info("plate reader step %d: held-out %.3f (%.0f s)", step + 1, curve.accuracy[-1], time.perf_counter() - t0)
+            if _flattened(curve.accuracy, budget):
+                curve.stopped = "flattened"
+                break
+    curve.still_rising = curve.stopped == "budget" and _gain(curve.accuracy, budget.patience) >= budget.min_gain
+    curve.seconds = round(time.perf_counter() - t0, 1)
+    net.eval()
+    return curve
+
+
+def _gain(accuracy: list[float], patience: int) -> float:
+    """How much the last ``patience`` evaluations raised the best accuracy seen before them."""
+    if len(accuracy) <= patience:
+        return float("inf") if accuracy else 0.0
+    return max(accuracy[-patience:]) - max(accuracy[:-patience])
+
+
+def _flattened(accuracy: list[float], budget: ReaderBudget) -> bool:
+    return len(accuracy) > budget.patience and _gain(accuracy, budget.patience) < budget.min_gain

@@ -1,0 +1,166 @@
+"""learned-reader: its simulation, crops, training stop rule, shipped start, determinism and cache."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import attacks
+import lenses
+from attacks.learned_reader import LearnedReader, pretrained_key
+from attacks.plate_reader_training import FitCurve, ReaderBudget, _flattened, _gain, plate_accuracy, train_reader
+from attacks.plates.plate_render import PLATE_FORMAT
+from attacks.plates.plate_sim import CROP_HW, crop_margin_px, plate_crops, psf_radius_px, simulate_plates
+from attacks.shipped_weights import find_shipped
+
+
+class MemoryStore:
+    """An ``ArtifactStore`` in a dict (the benchmark's cache implements the same two calls)."""
+
+    def __init__(self) -> None:
+        self.items: dict[str, bytes] = {}
+
+    def load(self, kind, key):
+        return self.items.get(f"{kind}:{sorted(key.items())!r}")
+
+    def save(self, kind, key, data):
+        self.items[f"{kind}:{sorted(key.items())!r}"] = data
+
+
+def test_psf_radius_of_a_gaussian_is_the_rayleigh_quantile(make_gaussian_psf):
+    # The radius of a 2-D Gaussian (sigma) holding a fraction E of its light: sigma sqrt(-2 ln(1 - E)).
+    sigma = 3.0
+    psf = make_gaussian_psf(sigma, 20, torch.float64)
+    for energy in (0.5, 0.8):
+        assert psf_radius_px(psf, energy) == pytest.approx(sigma * math.sqrt(-2 * math.log(1 - energy)), abs=0.35)
+
+
+def test_crop_of_a_box_the_size_of_the_input_is_the_region_itself():
+    # A box whose grown size is exactly CROP_HW, on whole pixels: RoIAlign samples pixel centres, so the
+    # crop is that region, standardised per channel.
+    h, w = CROP_HW
+    spread = 2.0
+    # grow (bw, bh) by the margin to (w, h): bw + 2 (0.15 bw + s) = w, bh + 2 (0.3 bh + s) = h
+    bw, bh = (w - 2 * spread) / 1.3, (h - 2 * spread) / 1.6
+    image = torch.rand(1, 3, 60, 160, generator=torch.Generator().manual_seed(0))
+    mx, my = crop_margin_px((bw, bh), spread)
+    x0, y0 = 10 + mx, 7 + my
+    crop = plate_crops(image, [(0, (x0, y0, x0 + bw, y0 + bh))], spread)[0]
+    region = image[0, :, 7:7 + h, 10:10 + w]
+    expected = (region - region.mean(dim=(1, 2), keepdim=True)) / (region.std(dim=(1, 2), keepdim=True) + 1e-3)
+    torch.testing.assert_close(crop, expected, atol=1e-4, rtol=1e-4)
+
+
+def test_simulation_is_a_function_of_its_seeds_and_labels_spell_the_text():
+    def batch(seed):
+        return simulate_plates(None, 6, (30, 60), np.random.default_rng(seed), torch.Generator().manual_seed(seed),
+                               0.0, PLATE_FORMAT)
+    a, b, c = batch(1), batch(1), batch(2)
+    assert torch.equal(a.crops, b.crops) and a.texts == b.texts
+    assert a.texts != c.texts
+    assert a.crops.shape == (6, 3, *CROP_HW)
+    letters, digits = "ABCDEFGHIJKLMNOPQRSTUVWXYZ", "0123456789"
+    for text, label in zip(a.texts, a.labels.tolist()):
+        assert "".join((letters if f == "L" else digits)[i] for f, i in zip(PLATE_FORMAT, label)) == text
+    assert all(28 <= w <= 63 for w in a.widths_px)
+
+
+def test_the_stop_rule_flattens_and_flags_a_rising_fit():
+    budget = ReaderBudget(max_steps=10, batch_size=2, lr=1e-3, widths_px=(30, 60), eval_every=1, eval_plates=1,
+                          patience=2, min_gain=0.01)
+    assert _gain([0.1, 0.5, 0.5, 0.505], 2) == pytest.approx(0.005)
+    assert _flattened([0.1, 0.5, 0.5, 0.505], budget)        # two evaluations gained < 1 point
+    assert not _flattened([0.1, 0.3, 0.5, 0.6], budget)      # still climbing
+    assert not _flattened([0.1, 0.5], budget)                # too few evaluations to tell
+    # A fit that runs out of steps while climbing is flagged; one that flattened is not.
+    net = LearnedReader.build(PLATE_FORMAT)
+    held = {32: simulate_plates(None, 2, (32, 32), np.random.default_rng(0), torch.Generator().manual_seed(0), 0.0,
+                                PLATE_FORMAT, jitter=False)}
+    curve = train_reader(net, [None], dataclasses.replace(budget, max_steps=2, patience=3), 0.0, 0, PLATE_FORMAT, 0, held)
+    assert curve.stopped == "budget" and curve.still_rising and curve.steps == [1, 2]
+    assert FitCurve.from_dict(curve.to_dict()) == curve
+
+
+@pytest.fixture(scope="module")
+def shipped_net():
+    shipped = find_shipped("learned-reader", pretrained_key(PLATE_FORMAT))
+    assert shipped is not None, "the package ships learned-reader's pre-trained weights (pretrain-attacker learned-reader)"
+    reader = LearnedReader()
+    net = reader.build(PLATE_FORMAT)
+    from attacks.learned_reader import _unpack
+    curve = _unpack(net, shipped.data)
+    return net.eval(), curve, shipped
+
+
+def test_shipped_start_reads_clean_plates_at_32_px(shipped_net):
+    # Clean rendered plates (no lens, no noise) of 32 px +- 5 %, the true box: what read() makes of them.
+    net, _, _ = shipped_net
+    reader = LearnedReader()
+    reader.net = net
+    plates = simulate_plates(None, 200, (32, 32), np.random.default_rng(2026), torch.Generator().manual_seed(2026), 0.0,
+                             PLATE_FORMAT, jitter=False)
+    reads = reader.read(plates.images, attacks.ReadHints(plate_boxes=[[box] for box in plates.boxes]))
+    correct = sum(r[0].text == text for r, text in zip(reads, plates.texts))
+    assert correct / len(plates.texts) >= 0.95
+
+
+def test_shipped_start_matches_its_recorded_curve(shipped_net):
+    # The held-out set is a function of the seed: the shipped weights score now what their provenance says.
+    from attacks.learned_reader import PRETRAIN_BUDGET
+    from attacks.plate_reader_training import held_out_set
+    net, curve, shipped = shipped_net
+    assert curve is not None and shipped.provenance["made"]["curve"]["accuracy"] == curve.accuracy
+    held = held_out_set(None, PRETRAIN_BUDGET, 0.0, 0, PLATE_FORMAT, 0)
+    for width, batch in held.items():
+        assert plate_accuracy(net, batch) == pytest.approx(curve.per_width[-1][width], abs=1.5 / len(batch.texts))
+
+
+def test_fit_is_deterministic_per_seed_cached_and_reads_given_boxes():
+    # No profile: the tiny budget (BUDGETS[None]), from the shipped start.
+    lens = lenses.load("ideal")
+    store = MemoryStore()
+    fits = []
+    for seed in (0, 0, 1):
+        reader = attacks.load("learned-reader")
+        reader.fit(attacks.FitContext(lens=lens, device="cpu", seed=seed, profile=None, artifacts=None))
+        fits.append(reader)
+    state = [r.net.state_dict() for r in fits]
+    assert all(torch.equal(state[0][k], state[1][k]) for k in state[0])
+    assert not all(torch.equal(state[0][k], state[2][k]) for k in state[0])
+    first = attacks.load("learned-reader")
+    first.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, profile=None, artifacts=store))
+    again = attacks.load("learned-reader")
+    again.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, profile=None, artifacts=store))
+    assert first.trained and again.trained is False and again.curve == first.curve
+    described = again.describe()
+    assert described["fit_curve"]["steps"] and isinstance(described["fit_still_rising"], bool)
+    images = torch.rand(2, 3, 64, 128, generator=torch.Generator().manual_seed(3))
+    boxes = [[(10.0, 10.0, 74.0, 24.0), (0.0, 0.0, 5.0, 2.0)], []]  # the 5 px box is below min_width_px
+    reads = again.read(images, attacks.ReadHints(plate_boxes=boxes))
+    assert [len(r) for r in reads] == [1, 0]
+    assert reads[0][0].box_xyxy == boxes[0][0] and len(reads[0][0].text) == len(PLATE_FORMAT)
+    assert 0.0 <= reads[0][0].score <= 1.0
+    assert again.read(images, None) == [[], []]
+
+
+def test_a_lens_that_forms_no_image_is_a_skip_not_a_crash(fake_lens):
+    reader = attacks.load("learned-reader")
+    reason = reader.skip_reason(attacks.FitContext(lens=fake_lens))
+    assert reason and "lens(x, generator=g)" in reason
+    assert "has none" in reader.skip_reason(attacks.FitContext(lens=None))
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not __import__("os").environ.get("RUN_SLOW"), reason="fine-tunes on the quick ideal lens (minutes): RUN_SLOW=1")
+def test_on_the_ideal_lens_it_reads_more_quick_plates_than_lpdr_oracle_and_never_above_the_ceiling():
+    from benchmark.studies.reader_study import run_reader_study
+    record = run_reader_study(("ideal",), ("learned-reader", "lpdr-oracle"), n_plates=200, out_json=None)
+    plates = record["plates"]
+    read = {r: sum(p["correct"] for p in plates if p["attack"] == r) for r in ("learned-reader", "lpdr-oracle")}
+    assert read["learned-reader"] > read["lpdr-oracle"], read
+    # Bins with enough plates to tell are checked against the lens's T = 1 ceiling by the study itself.
+    assert record["consistency"]["violations"] == []
