@@ -48,4 +48,4 @@ def test_report_renders_the_study_chart(ideal_records, tmp_path):
     written = leaderboard_report.render(tmp_path)
     chart = tmp_path / "charts" / "psf_grid.png"
     assert chart in written and chart.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert "charts/psf_grid.png" in (tmp_path / "README.md").read_text()
+    assert "charts/psf_grid.png" in (tmp_path / "charts.md").read_text()
