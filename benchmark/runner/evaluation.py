@@ -417,7 +417,7 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
         timing["n_frames"] = float(target.plates.n_frames)
     # A chain needs what its strongest part needs (a known-PSF restorer's lens access, say).
     threat = reader.threat_model if restorer is None else attacks.ThreatModel.strongest(
-        reader.threat_model, restorer_threat(out, restorer, reader.threat_model))
+        reader.threat_model, out.threat_models[restorer])
     row = rows.row(kind, {**summarise(outcomes), **timing}, attack=chain, restorer=restorer, reader=reader.name,
                    threat_model=threat.value, settings=settings, notes=dict(ready.notes))
     plate_intervals(row, outcomes)
@@ -433,15 +433,6 @@ def read_sensor(target: Target, readers: Sequence[ReadyReader], cfg: RunConfig, 
     for ready in readers:
         read_chain(target, ready, None, target.sensor if target.plates is None else target.plates.sensor,
                    cfg, rows, out)
-
-
-def restorer_threat(out: Attacked, restorer: str, default: attacks.ThreatModel) -> attacks.ThreatModel:
-    """The threat model of a restorer whose output is in `out`: as it ran, else as its description
-    names it (restored sets handed in from elsewhere), else `default`."""
-    if restorer in out.threat_models:
-        return out.threat_models[restorer]
-    named = out.described.get(restorer, {}).get("threat_model")
-    return attacks.ThreatModel(named) if named in {m.value for m in attacks.ThreatModel} else default
 
 
 def run_reader(target: Target, reader: attacks.Reader, cfg: RunConfig, rows: RowBuilder, out: Attacked) -> None:

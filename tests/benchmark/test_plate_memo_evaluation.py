@@ -49,7 +49,8 @@ def _attack(cfg: RunConfig, scenes, sensor: torch.Tensor, same_segmenter: bool):
     target = Target("fake", scenes, sensor, sensor, attacks.FitContext(extras={"segmenter": seg_sensor}),
                     seg_sensor, seg_restored)
     out = Attacked(restored={"raw": sensor.clone(), "gray-world": gray_world_balance(sensor)},
-                   described={"raw": {"name": "raw"}, "gray-world": {"name": "gray-world"}}, references={"raw"})
+                   described={"raw": {"name": "raw"}, "gray-world": {"name": "gray-world"}}, references={"raw"},
+                   threat_models={"raw": attacks.ThreatModel.SENSOR_ACCESS, "gray-world": attacks.ThreatModel.SENSOR_ACCESS})
     builder = RowBuilder(cfg, "fake", 0, {"lens": "fake"}, {"device": "cpu"})
     hits = {}
     for name in ("lpdr", "lpdr-oracle"):
