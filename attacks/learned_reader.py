@@ -162,10 +162,8 @@ class LearnedReader(Reader):
         if data is None:
             camera = self._camera(ctx)
             held_out = held_out_set(camera, self.budget, self.spread_px, half, self.plate_format, ctx.seed)
-            with torch.random.fork_rng(devices=[]):
-                torch.manual_seed(ctx.seed)
-                self.curve = train_reader(net, [camera], self.budget, self.spread_px, half, self.plate_format, ctx.seed,
-                                          held_out)
+            self.curve = train_reader(net, [camera], self.budget, self.spread_px, half, self.plate_format, ctx.seed,
+                                      held_out)
             self.trained = True
             if ctx.artifacts is not None:
                 ctx.artifacts.save(self.name, key, pack_weights(net, self.curve))
@@ -174,9 +172,7 @@ class LearnedReader(Reader):
     def _start(self, seed: int, pretrain_budget: ReaderBudget) -> tuple[PlateCNN, dict[str, Any]]:
         """The network to fine-tune and what it started from: the shipped pre-trained weights for the
         plate format, else a fresh network pre-trained here on sharp plates (seeded, ``pretrain_budget``)."""
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(seed)
-            net = self.build(self.plate_format)
+        net = self.build(self.plate_format, seed)
         shipped = find_shipped(self.name, pretrained_key(self.plate_format)) if self.use_shipped else None
         if shipped is not None:
             _unpack(net, shipped.data)
@@ -187,8 +183,11 @@ class LearnedReader(Reader):
                      "held_out": curve.accuracy[-1:]}
 
     @staticmethod
-    def build(fmt: str) -> PlateCNN:
-        return PlateCNN(tuple(len(a) for a in format_alphabets(fmt)), width=WIDTH)
+    def build(fmt: str, seed: int) -> PlateCNN:
+        """A fresh reader network for plate format ``fmt``, initialised from ``seed``."""
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed)
+            return PlateCNN(tuple(len(a) for a in format_alphabets(fmt)), width=WIDTH)
 
     def read(self, images: Tensor, hints: ReadHints | None = None) -> list[list[PlateRead]]:
         """One read per given plate box at least ``min_width_px`` wide; nothing without boxes."""
@@ -202,13 +201,11 @@ class LearnedReader(Reader):
             return reads
         device = next(self.net.parameters()).device
         images = images.to(device)
-        probabilities: list[Tensor] = []
         with torch.no_grad():
-            for view in VIEWS:
-                logits = self.net(plate_crops(images, [(i, _moved(box, view)) for i, box in wanted], self.spread_px))
-                for slot, p in enumerate(logits):
-                    p = p.softmax(dim=1).cpu() / len(VIEWS)
-                    probabilities.append(p) if len(probabilities) <= slot else probabilities[slot].add_(p)
+            per_view = [[slot.softmax(dim=1).cpu() / len(VIEWS) for slot in
+                         self.net(plate_crops(images, [(i, _moved(box, view)) for i, box in wanted], self.spread_px))]
+                        for view in VIEWS]
+        probabilities = [sum(views[1:], views[0]) for views in zip(*per_view)]  # per slot, the mean over the views
         alphabets = format_alphabets(self.plate_format)
         for n, (i, box) in enumerate(wanted):
             best = [p[n].max(dim=0) for p in probabilities]
@@ -221,7 +218,7 @@ class LearnedReader(Reader):
         """Budget, plate format, PSF spread, where the start weights came from and the fit's curve."""
         described = {**super().describe(), "plate_format": self.plate_format, "spread_px": round(self.spread_px, 3),
                      "budget": None if self.budget is None else self.budget.to_dict(), "trained": self.trained,
-                     "recipe": "per-slot CE, label smoothing 0.05, AdamW one-cycle; stops when held-out accuracy flattens"}
+                     "recipe": "per-slot CE, label smoothing 0.05, AdamW warm-up then cosine; stops when held-out accuracy flattens"}
         if self.shipped is not None:
             described["shipped_weights"] = self.shipped.describe()
         if self.curve is not None:
@@ -250,6 +247,4 @@ def pretrain(net: PlateCNN, fmt: str, seed: int, budget: ReaderBudget | None = N
         return (x + sigma * torch.randn(x.shape, generator=generator)).clamp(0.0, 1.0)
 
     held_out = held_out_set(None, budget, 0.0, 0, fmt, seed)
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(seed)
-        return train_reader(net, [sharp_camera], budget, 0.0, 0, fmt, seed, held_out)
+    return train_reader(net, [sharp_camera], budget, 0.0, 0, fmt, seed, held_out)

@@ -116,7 +116,15 @@ def _loss(logits: list[Tensor], labels: Tensor, criterion: nn.Module) -> Tensor:
 def train_reader(net: PlateCNN, cameras: list[Camera | None], budget: ReaderBudget, spread_px: float,
                  psf_half_px: int, fmt: str, seed: int, held_out: dict[int, PlateBatch]) -> FitCurve:
     """Train ``net`` in place on plates through ``cameras`` (taken in turn, one per batch), stopping
-    where the held-out accuracy flattens (module docstring). Deterministic for a seed and thread count."""
+    where the held-out accuracy flattens (module docstring). Deterministic for a seed and thread count:
+    the batches come from ``seed``, and so does dropout (torch's global generator, forked and restored)."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        return _train(net, cameras, budget, spread_px, psf_half_px, fmt, seed, held_out)
+
+
+def _train(net: PlateCNN, cameras: list[Camera | None], budget: ReaderBudget, spread_px: float,
+           psf_half_px: int, fmt: str, seed: int, held_out: dict[int, PlateBatch]) -> FitCurve:
     rng, generator = np.random.default_rng([seed, 0]), torch.Generator().manual_seed(seed)
     optimizer = torch.optim.AdamW(net.parameters(), lr=budget.lr, weight_decay=1e-4)
     warmup, total = max(1, budget.max_steps // 10), max(budget.max_steps, 1)

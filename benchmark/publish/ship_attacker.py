@@ -64,9 +64,7 @@ def check_scores(attacker: NafnetGeneric, ctx: Any) -> dict[str, float]:
 def ship_reader(args: argparse.Namespace) -> int:
     """Pre-train ``learned-reader`` on sharp plates (seeded; the profile plays no part) and ship it
     with its held-out curve, which ``tests/attacks/test_learned_reader.py`` checks the weights against."""
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(args.seed)
-        net = LearnedReader.build(PLATE_FORMAT)
+    net = LearnedReader.build(PLATE_FORMAT, args.seed)
     curve = pretrain(net, PLATE_FORMAT, args.seed)
     made = {"commit": git_commit(), "command": f"python -m benchmark pretrain-attacker learned-reader --seed {args.seed}",
             "seed": args.seed, "fit_s": curve.seconds, "threads": torch.get_num_threads(),

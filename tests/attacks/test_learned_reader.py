@@ -77,7 +77,7 @@ def test_the_stop_rule_flattens_and_flags_a_rising_fit():
     assert not _flattened([0.1, 0.3, 0.5, 0.6], budget)      # still climbing
     assert not _flattened([0.1, 0.5], budget)                # too few evaluations to tell
     # A fit that runs out of steps while climbing is flagged; one that flattened is not.
-    net = LearnedReader.build(PLATE_FORMAT)
+    net = LearnedReader.build(PLATE_FORMAT, 0)
     held = {32: simulate_plates(None, 2, (32, 32), np.random.default_rng(0), torch.Generator().manual_seed(0), 0.0,
                                 PLATE_FORMAT, jitter=False)}
     curve = train_reader(net, [None], dataclasses.replace(budget, max_steps=2, patience=3), 0.0, 0, PLATE_FORMAT, 0, held)
@@ -90,7 +90,7 @@ def shipped_net():
     shipped = find_shipped("learned-reader", pretrained_key(PLATE_FORMAT))
     assert shipped is not None, "the package ships learned-reader's pre-trained weights (pretrain-attacker learned-reader)"
     reader = LearnedReader()
-    net = reader.build(PLATE_FORMAT)
+    net = reader.build(PLATE_FORMAT, 0)
     from attacks.learned_reader import _unpack
     curve = _unpack(net, shipped.data)
     return net.eval(), curve, shipped
