@@ -45,13 +45,14 @@ _HAZE = np.array([0.62, 0.66, 0.72], dtype=np.float32)
 class PlateBatch:
     """Simulated plates: the reader's input crops (N, 3, *CROP_HW), the per-slot class indices
     (N, slots) into each slot's alphabet, the strings, the plate widths in pixels, and the images
-    (N, 3, H, W) with each plate's box on them (the box the crop was cut from)."""
+    (N, 3, H, W) with each plate's box on them (the box the crop was cut from; None where a caller
+    keeps only the crops)."""
 
     crops: Tensor
     labels: Tensor
     texts: list[str]
     widths_px: list[int]
-    images: Tensor
+    images: Tensor | None
     boxes: list[tuple[float, float, float, float]]
 
 
