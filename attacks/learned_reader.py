@@ -97,6 +97,8 @@ class LearnedReader(Reader):
     Args:
         min_width_px: Narrower boxes are not read (the scorer scores none that narrow).
         use_shipped: Start from the package's pre-trained weights (False: pre-train here first).
+        use_shipped_fit: Load a fit the package ships for this lens and key (``ship-lens``) instead of
+            fine-tuning (False: fine-tune here unless the cache holds the fit).
 
     Attributes (after ``fit``): ``curve`` (the fine-tuning's held-out curve, None when loaded from a
     cache written without one), ``trained`` (False: weights came from the cache), ``shipped``.
@@ -104,13 +106,17 @@ class LearnedReader(Reader):
 
     name: ClassVar[str] = "learned-reader"
     threat_model: ClassVar[ThreatModel] = ThreatModel.LENS_ACCESS
-    requires: ClassVar[frozenset[str]] = frozenset({"lens"})
-    # Minutes of fitting per lens on 2 cores: run it by name until the standard ensemble's budget takes it.
-    run_by_default: ClassVar[bool] = False
+    # No required field: with no lens (the sharp scenes) it reads with its sharp start (``fit``).
+    requires: ClassVar[frozenset[str]] = frozenset()
+    # In the standard ensemble (benchmark.results.ensemble_choice.STANDARD_ENSEMBLE); --all-chains adds it too.
+    run_by_default: ClassVar[bool] = True
 
-    def __init__(self, min_width_px: int = 8, use_shipped: bool = True) -> None:
+    def __init__(self, min_width_px: int = 8, use_shipped: bool = True, use_shipped_fit: bool = True) -> None:
         self.min_width_px = min_width_px
         self.use_shipped = use_shipped
+        self.use_shipped_fit = use_shipped_fit
+        self.fit_key: dict[str, Any] | None = None
+        self.shipped_fit: Shipped | None = None
         self.plate_format = PLATE_FORMAT
         self.net: PlateCNN | None = None
         self.spread_px = 0.0
@@ -120,9 +126,7 @@ class LearnedReader(Reader):
         self.shipped: Shipped | None = None
 
     def skip_reason(self, ctx: FitContext) -> str | None:
-        if ctx.lens is None:
-            return "learned-reader simulates its training plates through the lens, and this context has none"
-        if not callable(ctx.lens):
+        if ctx.lens is not None and not callable(ctx.lens):
             return ("learned-reader needs a lens that forms sensor images (lens(x, generator=g), as lenses.Lens does) "
                     f"to simulate its training plates; {type(ctx.lens).__name__} does not")
         return None
@@ -137,22 +141,31 @@ class LearnedReader(Reader):
         return camera
 
     def fit(self, ctx: FitContext) -> None:
-        """Fine-tune (or load from ``ctx.artifacts``) the reader on plates through ``ctx.lens``."""
+        """Fine-tune (or load from ``ctx.artifacts``) the reader on plates through ``ctx.lens``; with no
+        lens (the sharp scenes) read with the start, pre-trained on sharp plates, as it is."""
         reason = self.skip_reason(ctx)
         if reason is not None:
             raise ValueError(reason)
         self.plate_format = str(ctx.extras.get("plate_format", PLATE_FORMAT))
         lens: Any = ctx.lens
-        psf = lens.psf().detach().cpu()
-        self.spread_px, half = psf_radius_px(psf), psf.shape[-1] // 2
         profile = getattr(ctx.profile, "name", None)
         self.budget = BUDGETS.get(profile, BUDGETS["quick"])
         # Without shipped weights a smoke run (or no profile) starts from its own tiny pre-training:
         # the full one took 25 minutes on one of 2 loaded cores.
         net, start = self._start(ctx.seed, self.budget if profile in (None, "smoke") else PRETRAIN_BUDGET)
+        if lens is None:  # the sharp scenes themselves: the start was trained on sharp plates, read with it
+            self.spread_px, self.budget, self.trained = 0.0, None, False
+            self.net = net.to(ctx.device).eval()
+            return
+        psf = lens.psf().detach().cpu()
+        self.spread_px, half = psf_radius_px(psf), psf.shape[-1] // 2
         key = {"attack": self.name, "budget": self.budget.to_dict(), "lens": lens_key(lens), "format": self.plate_format,
                "start": start, "seed": ctx.seed}
+        self.fit_key = key
         data = None if ctx.artifacts is None else ctx.artifacts.load(self.name, key)
+        if data is None and self.use_shipped_fit:  # e.g. the shipped gp lens's fit (``ship-lens``)
+            self.shipped_fit = find_shipped(self.name, key)
+            data = None if self.shipped_fit is None else self.shipped_fit.data
         if data is not None:
             try:
                 self.curve, self.trained = _unpack(net, data), False
@@ -221,6 +234,8 @@ class LearnedReader(Reader):
                      "recipe": "per-slot CE, label smoothing 0.05, AdamW warm-up then cosine; stops when held-out accuracy flattens"}
         if self.shipped is not None:
             described["shipped_weights"] = self.shipped.describe()
+        if self.shipped_fit is not None:
+            described["shipped_fit"] = self.shipped_fit.describe()
         if self.curve is not None:
             described["fit_curve"] = self.curve.to_dict()
             described["fit_still_rising"] = self.curve.still_rising

@@ -25,7 +25,7 @@ import datetime as _dt
 import logging
 import tempfile
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -35,11 +35,12 @@ import lenses
 from benchmark.runner import attacker_objects, executors, runner, task_costs
 from benchmark.store.cache import cache_root
 from benchmark.runner.diagnostics.known_warnings import silence_known_warnings
-from benchmark.runner.planning import AttackerRef, plan as plan_tasks, run_directory
+from benchmark.runner.planning import AttackerRef, Task, plan as plan_tasks, run_directory
 from benchmark.store.profiles import Profile, get_profile
 from benchmark.store.provenance import git_commit
 from benchmark.runner.config import RunConfig, training_scenes
 from benchmark.scenes import PLATE_FORMAT, SCENE_SETS, load_scenes, plate_entropy_bits
+from benchmark.results.ensemble_choice import STANDARD_ENSEMBLE
 from benchmark.results.schema import Row, read_results, write_results
 from benchmark.results.schema import Results as ResultsFile
 from benchmark.runner.pictures import copy_picture
@@ -166,13 +167,16 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         profile: str | Profile = "quick", seeds: int | Sequence[int] = (0,), scenes: str = "synthetic",
         device: str = "cpu", out: str | Path | None = None, executor: str = "local",
         plate_format: str | None = None, frames: int = 30, budget_s: float | None = None,
-        meta: Mapping[str, Any] | None = None) -> Results:
+        all_chains: bool = False, meta: Mapping[str, Any] | None = None,
+        on_task: Callable[[Task], None] | None = None) -> Results:
     """Benchmark `lenses` against `attacks`; the CLI's `run` with the same meanings.
 
     Args:
         lenses: Registered lens names or .toml spec paths.
         attacks: Attackers: registered names, 'path/file.py:Class' specs, or attacks.Restorer /
-            attacks.Reader subclasses or instances. None: every attacker registered to run by default.
+            attacks.Reader subclasses or instances; every reader runs on the sensor image and after
+            every restorer given. None: the standard ensemble (`STANDARD_ENSEMBLE`, docs/ensemble.md):
+            its chains only.
         profile: "smoke", "quick" or "paper" (or a `Profile`).
         seeds: Seeds to run, distinct integers.
         scenes: "synthetic", "photos" or "cityscapes:PATH".
@@ -183,7 +187,11 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         frames: Frames of a static plate for the video bound (>= 1).
         budget_s: Wall-time budget (s) of each expensive step (an attacker's fit, restore or read;
             the bound); a step past it gives a failed row. None: no budget.
+        all_chains: With `attacks` None: every attacker registered to run by default, every reader
+            after every restorer (the full cross product) instead of the standard ensemble.
         meta: Extra facts stored in results.json's meta (the CLI stores its command line).
+        on_task: Called with each task (`benchmark.runner.planning.Task`) as it completes, computed or
+            found in the cache (a progress bar's hook; `publish` uses it).
 
     Returns:
         `Results`; `Results.table()` is the DataFrame.
@@ -197,13 +205,13 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
     if out is not None and not isinstance(out, (str, Path)):
         raise TypeError(f"out must be a folder path (str or pathlib.Path) or None, got {type(out).__name__} {out!r}")
     cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames,
-                                budget_s)
+                                budget_s, all_chains)
     folder, created = prepare_out(Path(out)) if out is not None else (None, False)
     log.info("profile %s: %s", cfg.profile.name, cfg.profile.to_dict())
     t0 = time.perf_counter()
     try:
         output = runner.run(cfg, executor=executor, selection=selection,
-                            partial=folder / PARTIAL_RESULTS if folder is not None else None)
+                            partial=folder / PARTIAL_RESULTS if folder is not None else None, on_task=on_task)
     except BaseException:
         if created and folder is not None and not any(folder.iterdir()):
             folder.rmdir()
@@ -219,8 +227,10 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
 
 def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike] | None, profile: str | Profile,
                seeds: int | Sequence[int], scenes: str, device: str, executor: str, plate_format: str | None,
-               frames: int, budget_s: float | None) -> tuple[RunConfig, runner.Selection]:
-    """Check every argument (before any compute) and choose the attackers."""
+               frames: int, budget_s: float | None, all_chains: bool = False
+               ) -> tuple[RunConfig, runner.Selection]:
+    """Check every argument (before any compute) and choose the attackers (and with `attacks` None and
+    not `all_chains`, the standard ensemble's chains)."""
     _check_types(lens_names=lens_names, profile=profile, scenes=scenes, device=device, executor=executor,
                  plate_format=plate_format)
     p = _profile(profile)
@@ -245,10 +255,14 @@ def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike
         executors.get(executor)  # fails fast on a bad name or a missing Ray
     except RuntimeError as exc:  # Ray not installed: say so as for any other bad argument
         raise ValueError(f"executor {executor!r}: {exc}; or use executor 'local'") from None
-    selection = select_attackers(requested, remote=executor != "local")
+    if not isinstance(all_chains, bool):
+        raise TypeError(f"all_chains must be True or False, got {all_chains!r}")
+    standard = requested is None and not all_chains
+    selection = select_attackers(runner.standard_attackers() if standard else requested, remote=executor != "local")
     cfg = RunConfig(lenses=names, attacks=[r.spec for r in selection.restorers + selection.readers],
                     scenes=scenes, profile=p, seeds=_seeds(seeds), device=check_device(device),
-                    plate_format=plate_format, frames=frames, budget_s=budget_s)
+                    plate_format=plate_format, frames=frames, budget_s=budget_s,
+                    chains=STANDARD_ENSEMBLE if standard else None)
     return cfg, selection
 
 
@@ -436,7 +450,7 @@ class Plan:
 def plan(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = None, *,
          profile: str | Profile = "quick", seeds: int | Sequence[int] = (0,), scenes: str = "synthetic",
          device: str = "cpu", executor: str = "local", plate_format: str | None = None,
-         frames: int = 30, budget_s: float | None = None) -> Plan:
+         frames: int = 30, budget_s: float | None = None, all_chains: bool = False) -> Plan:
     """The dry run of `run` with the same arguments: its tasks, which are cached, what each costs.
 
     Computes nothing and writes nothing (the attackers are constructed, to know their kinds).
@@ -444,16 +458,17 @@ def plan(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = N
     profile settings, scenes, device; any seed) in the cache, or unknown.
     """
     cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames,
-                                budget_s)
+                                budget_s, all_chains)
     directory = run_directory(cfg, selection.restorers, selection.readers)
     measured = task_costs.measurements(cfg.cache_dir)
+    kind = None if attacks is not None else "all-chains" if all_chains else "standard"
     planned = []
     for task in plan_tasks(cfg, selection.restorers, selection.readers):
         cached = is_cached(directory, task)
         planned.append(PlannedTask(task.key, task.kind, task.seed, task.lens,
                                    tuple(r.name for r in task.restorers + task.readers), cached,
                                    task_costs.recorded(directory / task.key) if cached else None,
-                                   task_costs.estimate(task, cfg, measured, default_attackers=attacks is None)))
+                                   task_costs.estimate(task, cfg, measured, attackers=kind)))
     return Plan(planned, directory, cfg.profile.name, selection.failures)
 
 

@@ -32,6 +32,7 @@ EPILOG = """examples:
   python -m benchmark run --lens ideal --attack wiener-known-psf --attack lpdr --out runs/first
   python -m benchmark export-mask gp --format zemax-gridsag --out gp_mask.dat
   python -m benchmark report                                      re-render leaderboard/
+  python -m benchmark publish --dry-run                           the whole quick leaderboard's plan and cost
 
 `python -m benchmark COMMAND --help` for a command's options."""
 MASK_FORMATS = ("npy", "tiff", "zemax-gridsag", "csv")  # lenses.mask_export.FORMATS (a test keeps them equal)
@@ -137,8 +138,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--lens", action="append", required=True, metavar="NAME|SPEC.toml",
                      help="lens to benchmark (repeatable): a registered name or a .toml spec path")
     attack = run.add_argument("--attack", action="append", default=None, metavar="NAME|FILE.py:Class",
-                              help="attacker to run (repeatable); default: the attackers registered to run by default")
+                              help="attacker to run (repeatable); every reader given runs on the sensor image and "
+                                   "after every restorer given; default: the standard ensemble (docs/ensemble.md)")
     attack.lazy_help = _attack_help  # type: ignore[attr-defined]
+    run.add_argument("--all-chains", action="store_true",
+                     help="without --attack: every attacker registered to run by default, every reader after every "
+                          "restorer (the full cross product), instead of the standard ensemble's chains")
     run.add_argument("--scenes", default="synthetic", help="synthetic (default), photos, or cityscapes:PATH")
     run.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
                      help="run size: %(choices)s (default: quick)")
@@ -189,8 +194,20 @@ def build_parser() -> argparse.ArgumentParser:
                      help="budget: %(choices)s (default: quick)")
     ship.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     ship.add_argument("--out", type=Path, default=None, help="weights folder (default: the package's attacks/weights)")
+    pub = sub.add_parser("publish", help="re-publish the leaderboard in one resumable run: every registered lens "
+                                         "(or those named) at the profile's seeds, the standard ensemble")
+    pub.add_argument("--lens", action="append", default=None, metavar="NAME",
+                     help="lens to re-publish (repeatable; default: every registered lens)")
+    pub.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
+                     help="run size: %(choices)s (default: quick)")
+    pub.add_argument("--seeds", type=_seeds, default=[0, 1, 2], help="comma-separated seeds (default 0,1,2)")
+    pub.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
+    pub.add_argument("--out", type=Path, default=None,
+                     help="the run's folder (default runs/publish-<profile>); the same command resumes there")
+    pub.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
+    pub.add_argument("--dry-run", action="store_true", help="print the plan and its estimated cost; compute nothing")
     lens_ship = sub.add_parser("ship-lens", help="co-design (or load from the cache) a lens and ship it, with its "
-                                                 "known-pairs NAFNet, in the package with their provenance")
+                                                 "known-pairs NAFNet and learned reader, in the package with their provenance")
     lens_ship.add_argument("lens", choices=CODESIGN_CHOICES, metavar="LENS",
                            help="co-design scheme registered as a lens: %(choices)s")
     lens_ship.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
@@ -199,6 +216,9 @@ def build_parser() -> argparse.ArgumentParser:
     lens_ship.add_argument("--out", type=Path, default=None,
                            help="folder to write into instead of the package (the lens there, the attacker's "
                                 "weights in OUT/attack_weights)")
+    lens_ship.add_argument("--reader-only", action="store_true",
+                           help="ship only the learned reader's fit on the lens a run loads (the shipped one), "
+                                "leaving the shipped lens and NAFNet as they are")
     listing = sub.add_parser("list", help="list lenses and attackers (what each is, its threat model, whether it runs "
                                           "by default) and scene sets")
     listing.add_argument("--json", action="store_true", help="print one JSON object, for scripts")
@@ -244,12 +264,16 @@ CODESIGN_CHOICES = _LazyChoices(_codesign_lenses)
 
 
 def _attack_help() -> str:
-    """`run --attack`'s help, with the attackers that run by default read from their classes."""
+    """`run --attack`'s help: the standard ensemble's chains, what --all-chains adds (the attackers
+    that run by default, read from their classes), and what runs only when named."""
+    from benchmark.results.ensemble_choice import STANDARD_ENSEMBLE
     rows = attacker_catalogue()
     default = [r["name"] for r in rows if r["runs_by_default"]]
-    named = [r["name"] for r in rows if not r["runs_by_default"]]
-    text = ("attacker to run (repeatable): a registered name or FILE.py:Class; default: "
-            + (", ".join(default) if default else "none"))
+    named = [r["name"] for r in rows if not r["runs_by_default"] and not r["standard_chains"]]
+    text = ("attacker to run (repeatable): a registered name or FILE.py:Class; every reader given runs on the "
+            "sensor image and after every restorer given; default: the standard ensemble's chains ("
+            + ", ".join(STANDARD_ENSEMBLE) + "); with --all-chains: " + (", ".join(default) if default else "none")
+            + ", every reader after every restorer")
     if named:
         text += "; run only when named: " + ", ".join(named)
     return text.replace("%", "%%")
@@ -266,10 +290,12 @@ def attacker_catalogue() -> list[dict[str, Any]]:
     default, a one-line description and where it comes from; one that fails to import says why."""
     import attacks
     from attacks.registry import ATTACKS_GROUP
+    from benchmark.results.ensemble_choice import STANDARD_ENSEMBLE
     from lenses.registry import discover
     rows = []
     for name, entry in sorted(discover(ATTACKS_GROUP).items()):
-        row: dict[str, Any] = {"name": name, "source": entry.value}
+        row: dict[str, Any] = {"name": name, "source": entry.value,
+                               "standard_chains": [c for c in STANDARD_ENSEMBLE if name in c.split(">")]}
         try:
             cls = entry.load()
             row.update(kind="reader" if issubclass(cls, attacks.Reader) else "restorer",
@@ -334,10 +360,11 @@ def cmd_list(args: argparse.Namespace) -> int:
     print("lenses (each runs when named: --lens NAME):")
     for row in lens_rows:
         print(f"  {row['name']:16s} {row['kind']:12s} {row['description']}")
-    print("attackers (default: run when --attack is not given; named: only with --attack NAME):")
+    print("attackers (standard: in the standard ensemble, run when --attack is not given (docs/ensemble.md); "
+          "all-chains: added by --all-chains; named: only with --attack NAME):")
     for row in attacker_rows:
-        when = "default" if row["runs_by_default"] else "named"
-        print(f"  {row['name']:26s} {row['kind'] or '?':9s} {row['threat_model'] or '?':18s} {when:8s} "
+        when = "standard" if row["standard_chains"] else "all-chains" if row["runs_by_default"] else "named"
+        print(f"  {row['name']:26s} {row['kind'] or '?':9s} {row['threat_model'] or '?':18s} {when:10s} "
               f"{row['description']}")
     print("scene sets:")
     for name, text in SCENE_SETS.items():
@@ -352,7 +379,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     options = dict(lenses=args.lens, attacks=args.attack, profile=args.profile, seeds=args.seeds,
                    scenes=args.scenes, device=args.device, executor=args.executor,
-                   plate_format=args.plate_format, frames=args.frames, budget_s=args.budget_s)
+                   plate_format=args.plate_format, frames=args.frames, budget_s=args.budget_s,
+                   all_chains=args.all_chains)
     if args.dry_run:
         print(api.plan(**options).render())
         return 0
@@ -371,6 +399,36 @@ def cmd_run(args: argparse.Namespace) -> int:
                                         settings=output.settings)
         print(f"published {len(paths)} leaderboard entries; rendered the leaderboard")
     print(f"wrote {out}/: {', '.join(files_written(out, started))} ({results.meta['wall_s']:.1f} s)")
+    return report_failures(results.failed)
+
+
+def cmd_publish(args: argparse.Namespace) -> int:
+    """`publish`: plan, run with a progress bar over the estimated seconds (ETA), replace the entries."""
+    import lenses
+    from benchmark import api
+    from benchmark.publish import leaderboard, republish
+    from benchmark.store.profiles import get_profile
+
+    names = args.lens or sorted(lenses.available())
+    options = dict(lenses=names, profile=args.profile, seeds=args.seeds, device=args.device)
+    plan = api.plan(**options)
+    weights = republish.task_weights(plan.tasks)
+    print(f"publish {', '.join(names)} ({args.profile}, seeds {','.join(map(str, args.seeds))}): "
+          + republish.summary(plan.tasks, weights))
+    if args.dry_run:
+        print(plan.render())
+        return 0
+    out = args.out or Path("runs") / f"publish-{args.profile}"
+    bar = republish.EtaBar(weights)
+    try:
+        results = api.run(**options, out=out, meta={"command": sys.argv, "publish": True}, on_task=bar)
+    finally:
+        bar.close()
+    output = results.output
+    paths = leaderboard.publish_run(output.rows, get_profile(args.profile).to_dict(), output.lens_info, out,
+                                    args.dir or leaderboard.LEADERBOARD, settings=output.settings, replace=True)
+    print(f"published {len(paths)} leaderboard entries (replacing the older ones whole) and rendered the leaderboard "
+          f"in {results.meta['wall_s'] / 60:.1f} min; the run is in {out}/")
     return report_failures(results.failed)
 
 
@@ -500,6 +558,9 @@ def main(argv: list[str] | None = None) -> int:
     from lenses.registry import DuplicateNameError  # imports torch: after --help has answered
     if args.command == "run" and args.profile_python_memory and not args.profile_time:
         parser.error("--profile-python-memory traces allocations inside --profile-time's profile; add --profile-time")
+    if args.command == "run" and args.all_chains and args.attack:
+        parser.error("--all-chains widens the default attackers; with --attack the run is exactly the attackers "
+                     "named (every reader after every restorer): drop one of them")
     if args.command == "run" and args.dry_run and (args.profile_time or args.publish):
         parser.error("--dry-run computes nothing, so there is nothing to " +
                      ("profile (--profile-time)" if args.profile_time else "publish (--publish)") + "; drop one of them")
@@ -507,7 +568,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", force=True)
     commands = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "train": cmd_train, "study": cmd_study,
                 "export-mask": cmd_export_mask, "pretrain": cmd_pretrain,
-                "pretrain-attacker": cmd_pretrain_attacker, "ship-lens": cmd_ship_lens}
+                "pretrain-attacker": cmd_pretrain_attacker, "ship-lens": cmd_ship_lens, "publish": cmd_publish}
     try:
         return commands[args.command](args)
     except (ValueError, LookupError, NotImplementedError, FileNotFoundError, DuplicateNameError) as exc:

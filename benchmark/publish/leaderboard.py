@@ -85,12 +85,14 @@ def merge_entries(old: Entry, new: Entry) -> Entry:
 
 
 def publish(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[str, dict],
-            directory: Path = LEADERBOARD, settings: dict[str, Any] | None = None) -> list[Path]:
+            directory: Path = LEADERBOARD, settings: dict[str, Any] | None = None, replace: bool = False
+            ) -> list[Path]:
     """Write one entry per lens of a run's rows (the `sharp` reference included).
 
     An existing entry of the same (lens, profile, scenes) is merged (``merge_entries``), so a run
     with fewer attackers (or more seeds for some of them) cannot erase a richer one; rows this run
-    measured replace the stored ones. Holds the leaderboard's lock (see the module docstring).
+    measured replace the stored ones; with `replace` the run's entry replaces the stored one whole (a
+    re-publish: nothing of an older version stays). Holds the leaderboard's lock (see the module docstring).
     """
     paths = []
     with locked(directory):
@@ -99,7 +101,7 @@ def publish(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[str, d
             entry = make_entry(lens, [r for r in rows if r.lens == lens], profile, info.get("coefficients_um"),
                                info.get("spec"), settings)
             path = directory / "entries" / entry_name(lens, entry.profile, entry.scenes)
-            if path.exists():
+            if path.exists() and not replace:
                 entry = merge_entries(read_entry(path), entry)
             paths.append(write_entry(path, entry))
     return paths
@@ -134,14 +136,15 @@ def copy_run_pictures(out: Path, lens_names: Iterable[str], profile: str, sample
 
 
 def publish_run(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[str, dict], out: Path,
-                directory: Path = LEADERBOARD, settings: dict[str, Any] | None = None) -> list[Path]:
+                directory: Path = LEADERBOARD, settings: dict[str, Any] | None = None, replace: bool = False
+                ) -> list[Path]:
     """Publish a run: its entries, its pictures, then re-render the leaderboard (and the project
     README's results table when `directory` is the repository's). Returns the written entries.
 
     The whole of it holds the leaderboard's lock, so that a concurrent publish neither loses rows nor
     renders over this one's pages with an older set of entries."""
     with locked(directory):
-        paths = publish(rows, profile, lens_info, directory, settings)
+        paths = publish(rows, profile, lens_info, directory, settings, replace)
         copy_run_pictures(out, lens_info, profile["name"], directory / "samples")
         leaderboard_report.render(directory)
         if directory == LEADERBOARD:

@@ -2,9 +2,10 @@
 
 The command co-designs the lens exactly as a run does (or loads the run from the cache), copies the
 finished run folder into ``benchmark/codesign/shipped/`` (``benchmark.codesign.shipped``), and fits
-the lens's known-pairs NAFNet, whose weights go to ``attacks/weights/`` under the key a run looks them
-up by (``attacks.shipped_weights``). A fresh ``python -m benchmark run --lens NAME`` at that profile
-and seed then neither co-designs nor fits that attacker; every number it prints is the same.
+the lens's known-pairs NAFNet and fine-tunes its learned reader, whose weights go to ``attacks/weights/``
+under the key a run looks them up by (``attacks.shipped_weights``). A fresh ``python -m benchmark run
+--lens NAME`` at that profile and seed then neither co-designs nor fits those attackers; every number it
+prints is the same.
 
 Each provenance records the commit, the command, the machine, the training seconds and a check that
 ``tests/benchmark/codesign/test_shipped_lens.py`` re-measures: the mIoU of the lens's own utility net
@@ -17,11 +18,13 @@ from __future__ import annotations
 import argparse
 import platform
 import time
+from pathlib import Path
 from typing import Any
 
 import torch
 from safetensors.torch import save as save_safetensors
 
+from attacks.learned_reader import LearnedReader, pack_weights
 from attacks.nafnet_known_pairs import NafnetKnownPairs
 from attacks.restorer_training import collect_pairs, random_crops
 from attacks.shipped_weights import write_shipped
@@ -38,6 +41,7 @@ from benchmark.scenes.loading import load_scenes
 from benchmark.runner.sensing import sense, to_tensor
 from benchmark.runner.tasks import fit_context
 from benchmark.runner.utility_measure import utility_metrics
+import lenses
 from lenses.lens import Lens
 from lenses.spec import load_spec
 
@@ -91,6 +95,13 @@ def main(args: argparse.Namespace) -> int:
                             "command": f"python -m benchmark ship-lens {args.lens} --profile {args.profile} "
                                        f"--seed {args.seed}",
                             "machine": _machine(), "packages": package_versions()}
+    if args.reader_only:
+        made["command"] += " --reader-only"
+        lens = lenses.load(args.lens, profile=profile, seed=args.seed, device="cpu", cache_dir=cache_root())
+        ctx = fit_context(lens, run_config(args.lens, profile, args.seed), args.seed, None)
+        weights = ship_learned_reader(ctx, args, made)
+        print(f"wrote {weights} ({weights.stat().st_size / 1e6:.1f} MB) and its provenance")
+        return 0
     run = codesign_run(args.lens, profile, args.seed, use_shipped=False)
     cached = run.load()
     trained = cached or run.train()
@@ -117,4 +128,23 @@ def main(args: argparse.Namespace) -> int:
         None if args.out is None else args.out / "attack_weights")
     print(f"wrote {weights} ({weights.stat().st_size / 1e6:.1f} MB) and its provenance; check PSNR "
           f"{check['psnr_in_db']:.2f} -> {check['psnr_out_db']:.2f} dB on {check['crops']} crops")
+    weights = ship_learned_reader(ctx, args, made)
+    print(f"wrote {weights} ({weights.stat().st_size / 1e6:.1f} MB) and its provenance")
     return 0
+
+
+def ship_learned_reader(ctx: Any, args: argparse.Namespace, made: dict[str, Any]) -> Path:
+    """Fine-tune (or load from the cache) learned-reader on the lens as a run does and ship the fit under
+    the key a run looks it up by; the check is its last held-out accuracy per plate width."""
+    reader = LearnedReader(use_shipped_fit=False)
+    t0 = time.perf_counter()
+    reader.fit(ctx)
+    assert reader.net is not None and reader.fit_key is not None and reader.curve is not None
+    curve = reader.curve
+    check = {"steps": curve.steps[-1] if curve.steps else 0, "still_rising": curve.still_rising,
+             "held_out_per_width": {str(k): v for k, v in (curve.per_width or [{}])[-1].items()}}
+    fit_s = round(time.perf_counter() - t0, 1) if reader.trained else None
+    return write_shipped(
+        f"{reader.name}-{args.lens}-{args.profile}-s{args.seed}", reader.name, reader.fit_key,
+        pack_weights(reader.net, curve), {**made, "trained_here": reader.trained, "fit_s": fit_s, "check": check},
+        None if args.out is None else args.out / "attack_weights")

@@ -17,8 +17,10 @@ ensemble plate accuracy by more than ``PLATE_POINTS`` points or its ensemble PSN
 the strongest restorer (the one that is the best restorer on the most scenes of the entries), and the
 learned reader once it is published. ``PROPOSED_ENSEMBLE`` is what that selects on the published quick
 entries (docs/ensemble.md, written by ``python -m benchmark.studies.ensemble_choice``;
-tests/benchmark/test_ensemble_choice.py recomputes it, so it cannot drift from the entries). It is
-not yet the run's default: that changes with the next re-publish.
+tests/benchmark/test_ensemble_choice.py recomputes it, so it cannot drift from the entries).
+
+``STANDARD_ENSEMBLE`` is the run's default (benchmark.runner.runner.standard_selection): the proposal, the
+learned reader on the sensor image, and the ``raw`` reference (the uncorrected image's PSNR, no chain).
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ import numpy as np
 from benchmark.results.ensemble import RESTORER_KINDS, plate_ensemble, seed_scenes
 from benchmark.results.entries import Entry
 
-__all__ = ["ChainEffect", "PLATE_POINTS", "PROPOSED_ENSEMBLE", "PSNR_DB", "DOCS", "keeps", "proposed_ensemble",
+__all__ = ["ChainEffect", "PLATE_POINTS", "PROPOSED_ENSEMBLE", "PSNR_DB", "STANDARD_ENSEMBLE", "DOCS", "keeps", "proposed_ensemble",
            "removal_effects", "strongest_restorer", "ensemble_values"]
 
 # The rule's thresholds: a chain whose removal moves some lens's ensemble by more than this stays.
@@ -48,6 +50,10 @@ PROPOSED_ENSEMBLE: tuple[str, ...] = (
     "demosaic-vng", "demosaic-vng>lpdr-oracle", "lpdr", "lpdr-oracle", "nafnet-known-pairs",
     "nafnet-known-pairs>lpdr-oracle", "richardson-lucy-known-psf", "richardson-lucy-known-psf>lpdr",
     "training-adversary", "training-adversary>lpdr-oracle", "wiener-known-psf", "wiener-known-psf>lpdr-oracle")
+
+# The run's default chains: the proposal, plus the learned reader (the strongest reader, which the
+# entries the proposal was chosen on did not hold) and the uncorrected image as a reference restorer.
+STANDARD_ENSEMBLE: tuple[str, ...] = PROPOSED_ENSEMBLE + ("learned-reader", "raw")
 
 
 @dataclasses.dataclass(frozen=True)

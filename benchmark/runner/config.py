@@ -22,6 +22,13 @@ class RunConfig:
     plate_format: str = PLATE_FORMAT   # the plate strings the bound's entropy counts
     frames: int = 30                   # T of the video bound (T = 1 is always reported)
     budget_s: float | None = None      # wall-time budget of each expensive step (attacker stages, bound)
+    # The attack chains to run (a restorer, a reader on the sensor image, or "restorer>reader"); None:
+    # every reader on the sensor image and after every restorer (the full cross product).
+    chains: tuple[str, ...] | None = None
+
+    def wants(self, chain: str) -> bool:
+        """Whether the run measures `chain` (always, in the full cross product)."""
+        return self.chains is None or chain in self.chains
 
 
 def training_scenes(scene_set: str) -> str:

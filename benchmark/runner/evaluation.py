@@ -306,7 +306,9 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
         restored = restored[:1].clone()
     release_free_memory()
     images: torch.Tensor | list[torch.Tensor] = restored
-    if target.plates is not None:
+    # Only the chains the run measures read this restorer's output (cfg.chains: the standard ensemble).
+    readers = [r for r in readers if cfg.wants(chain_name(attacker.name, r.reader.name))]
+    if target.plates is not None and readers:
         windows = attempt(attacker.name, "restore", lambda: restore_windows(
             attacker, target.plates.sensor, cfg.profile.batch_size, cfg.device))  # type: ignore[union-attr]
         if isinstance(windows, RowError):
@@ -322,7 +324,7 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
         read_chain(target, reader, attacker.name, images, cfg, rows, out)
         release_free_memory()
     del restored
-    if target.plates is not None:
+    if target.plates is not None and readers:
         out.restored_plates[attacker.name] = {i: images[i] for i in gallery_windows(target.plates)}
     del images
     metrics.update({"fit_s": float(fit_s), "images_per_s": target.sharp.shape[0] / run_s})
@@ -390,6 +392,8 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
     windows when the target has them) with one fitted reader and score the chain."""
     reader = ready.reader
     chain = reader.name if restorer is None else chain_name(restorer, reader.name)
+    if not cfg.wants(chain):  # not a chain of the run's ensemble (cfg.chains)
+        return
     kind = "reader" if restorer is None else "reference" if restorer in out.references else "chain"
     settings = {"reader": ready.described, **({"restorer": out.described[restorer]} if restorer else {})}
     chain_rows = out.reader_rows.setdefault(reader.name, [])

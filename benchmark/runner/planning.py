@@ -79,7 +79,8 @@ def run_directory(cfg: RunConfig, restorers: list[AttackerRef], readers: list[At
     key = config_hash({"version": TASK_VERSION, "commit": git_commit(), "lenses": cfg.lenses,
                        "restorers": [r.identity for r in restorers], "readers": [r.identity for r in readers],
                        "scenes": cfg.scenes, "profile": cfg.profile.to_dict(), "seeds": cfg.seeds,
-                       "device": cfg.device, "plate_format": cfg.plate_format, "frames": cfg.frames})
+                       "device": cfg.device, "plate_format": cfg.plate_format, "frames": cfg.frames,
+                       **({"chains": list(cfg.chains)} if cfg.chains is not None else {})})
     return Path(cfg.cache_dir) / "tasks" / key
 
 

@@ -13,6 +13,7 @@ score), `rows` (rows through the schema), and this module (orchestration).
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,6 +23,7 @@ from benchmark.runner.planning import AttackerRef, Task, plan, run_directory
 from benchmark.runner.tasks import TaskResult
 from benchmark.store.provenance import provenance
 from benchmark.runner.config import RunConfig
+from benchmark.results.ensemble_choice import STANDARD_ENSEMBLE
 from benchmark.results.schema import Results as ResultsFile
 from benchmark.results.schema import Row, RowError, settings_hash, write_results
 
@@ -66,6 +68,11 @@ def select_attackers(requested: list[str] | None) -> Selection:
                      failures)
 
 
+def standard_attackers() -> list[str]:
+    """The attackers of the standard ensemble (`STANDARD_ENSEMBLE`), each once, in order of first mention."""
+    return list(dict.fromkeys(part for chain in STANDARD_ENSEMBLE for part in chain.split(">")))
+
+
 def load_failure_rows(cfg: RunConfig, failures: list[attacks.PluginFailure]) -> tuple[list[Row], dict[str, dict]]:
     """One failed row per (lens, seed) for each attacker that did not load.
 
@@ -87,13 +94,14 @@ def load_failure_rows(cfg: RunConfig, failures: list[attacks.PluginFailure]) -> 
 
 
 def run(cfg: RunConfig, executor: str = "local", selection: Selection | None = None,
-        partial: Path | None = None) -> RunOutput:
+        partial: Path | None = None, on_task: Callable[[Task], None] | None = None) -> RunOutput:
     """Plan the run's tasks, execute them (locally or on Ray), and collect rows in plan order.
 
     `selection` is `select_attackers(cfg.attacks)` when the caller has checked it already. With
     `partial`, the rows of every task completed so far are rewritten there (a results file, meta
     "partial": true) as each task completes, so a run that dies leaves them on disk; the task
-    results themselves stay in the cache, and a rerun resumes from them."""
+    results themselves stay in the cache, and a rerun resumes from them. `on_task` is called with each task
+    as it completes (a progress bar's hook)."""
     selection = selection or select_attackers(cfg.attacks)
     planned = plan(cfg, selection.restorers, selection.readers)
     directory = run_directory(cfg, selection.restorers, selection.readers)
@@ -102,12 +110,17 @@ def run(cfg: RunConfig, executor: str = "local", selection: Selection | None = N
 
     def write_partial(task: Task, result: TaskResult) -> None:
         done[task.key] = result
+        if on_task is not None:
+            on_task(task)
+        if partial is None:
+            return
         so_far = collect([t for t in planned if t.key in done], done, directory, failures)
         write_results(partial, ResultsFile(so_far.rows, so_far.settings, {  # type: ignore[arg-type]
             "partial": True, "tasks_done": len(done), "tasks_total": len(planned),
             "task_results": str(directory)}))
 
-    results = executors.get(executor).run(planned, cfg, directory, write_partial if partial is not None else None)
+    listening = partial is not None or on_task is not None
+    results = executors.get(executor).run(planned, cfg, directory, write_partial if listening else None)
     return collect(planned, results, directory, failures)
 
 

@@ -38,7 +38,9 @@ def signature(task: Task, cfg: RunConfig) -> dict[str, Any]:
     profile's full settings (by hash), scenes and device."""
     return {"kind": task.kind, "lens": task.lens, "restorers": [r.identity for r in task.restorers],
             "readers": [r.identity for r in task.readers], "profile": cfg.profile.name,
-            "profile_hash": config_hash(cfg.profile.to_dict()), "scenes": cfg.scenes, "device": cfg.device}
+            "profile_hash": config_hash(cfg.profile.to_dict()), "scenes": cfg.scenes, "device": cfg.device,
+            # the chains an evaluation measures (absent: the full cross product, as older records hold)
+            **({"chains": list(cfg.chains)} if cfg.chains is not None and task.kind == "evaluate" else {})}
 
 
 def record(folder: Path, task: Task, cfg: RunConfig, wall_s: float) -> None:
@@ -103,11 +105,11 @@ class Estimate:
         return f"~{self.seconds:.0f} s{group} (measured on {self.table.machine}, {self.table.date})"
 
 
-def estimate(task: Task, cfg: RunConfig, measured: list[dict[str, Any]], default_attackers: bool = False
+def estimate(task: Task, cfg: RunConfig, measured: list[dict[str, Any]], attackers: str | None = None
              ) -> Estimate:
     """The median measured wall time of tasks with this task's signature in the cache; with none, the
-    shipped table's figure for its kind (`default_attackers`: the run's attackers are the default
-    ones, what the table's evaluations ran)."""
+    shipped table's figure for its kind (`attackers`: "standard", "all-chains" or None for attackers
+    named, as `measured_costs.quote` takes it; an evaluation's figure holds only for its attackers)."""
     wanted = signature(task, cfg)
     times = [m["wall_s"] for m in measured if m["signature"] == wanted]
     if times:
@@ -115,7 +117,7 @@ def estimate(task: Task, cfg: RunConfig, measured: list[dict[str, Any]], default
     if cfg.device != "cpu" or cfg.scenes != "synthetic":
         return Estimate(None, 0)
     restorer = task.restorers[0].name if task.kind == "fit" and task.restorers else None
-    quote = measured_costs.quote(cfg.profile.name, task.kind, task.seed, task.lens, restorer, default_attackers)
+    quote = measured_costs.quote(cfg.profile.name, task.kind, task.seed, task.lens, restorer, attackers)
     if quote is not None and quote.seconds is not None:
         quote = quote if cfg.profile.to_dict() == _shipped_profile(cfg.profile.name) else None
     return Estimate(quote.seconds if quote else None, 0, quote)

@@ -2,7 +2,7 @@
 
 Per profile: whole runs as measured (command, seconds, machine, date) and, where docs/costs.md
 breaks a run down, the seconds of each task kind (by fixed or co-designed lens, by restorer for a
-fit, for the default attackers only for an evaluation). A dry run quotes them for a task the cache
+fit, for the attackers it ran only for an evaluation). A dry run quotes them for a task the cache
 has no measurement of (`benchmark.runner.task_costs`); the profiles' descriptions take their times
 from the runs (`run_text`). Nothing here is estimated: a kind without a figure in docs/costs.md is
 absent, and a task installed from the package at that seed (the shipped gp lens of seed 0) is
@@ -67,8 +67,12 @@ class Quote:
 
 
 def quote(profile: str, kind: str, seed: int, lens: str = "", restorer: str | None = None,
-          default_attackers: bool = True) -> Quote | None:
-    """The table's figure for one planned task, or None when docs/costs.md has none for it."""
+          attackers: str | None = "standard") -> Quote | None:
+    """The table's figure for one planned task, or None when docs/costs.md has none for it.
+
+    `attackers` is what the run evaluates: "standard" (the standard ensemble), "all-chains" (every
+    attacker run by default after every restorer) or None (attackers named); an evaluation's figure
+    holds only for the attackers it was measured with (the table's "attackers" field)."""
     entry = table()["profiles"].get(profile)
     if entry is None:
         return None
@@ -82,7 +86,7 @@ def quote(profile: str, kind: str, seed: int, lens: str = "", restorer: str | No
     wanted = None if codesigned is None else ("co-designed" if codesigned else "fixed")
     candidates = [t for t in entry.get("tasks", []) if t["kind"] == kind
                   and ("lens" not in t or t["lens"] == wanted)
-                  and (t.get("attackers") != "default" or default_attackers)]
+                  and t.get("attackers", attackers) == attackers]
     named = [t for t in candidates if t.get("restorer") == restorer]
     if not named and restorer is not None:
         listed = {t.get("restorer") for t in entry.get("tasks", []) if t["kind"] == kind}

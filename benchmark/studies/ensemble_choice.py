@@ -134,8 +134,12 @@ def render(directory: Path = LEADERBOARD, date: str | None = None) -> str:
         "Chains that never decide a plate or a scene on any entry: " + (", ".join(f"`{a}`" for a in never) or "none")
         + ".", "",
         f"Left out of the proposal ({len(dropped)}): " + (", ".join(f"`{a}`" for a in dropped) or "none") + ".", "",
-        "This is `benchmark.results.ensemble_choice.PROPOSED_ENSEMBLE`; the run's default attackers change to it "
-        "only with the next re-publish of the whole leaderboard (issue 37), so that no entry mixes the two.",
+        "This is `benchmark.results.ensemble_choice.PROPOSED_ENSEMBLE`. The run's default, "
+        "`STANDARD_ENSEMBLE`, is it plus `learned-reader` on the sensor image and the `raw` reference (the "
+        "uncorrected image's PSNR, read by no chain): `python -m benchmark run` measures those chains only, "
+        "`--attack NAME` exactly the attackers named (every reader after every restorer), `--all-chains` the full "
+        "cross product of the attackers that run by default. Entries published before the standard ensemble "
+        "hold the full cross product until `python -m benchmark publish` replaces them.",
         drift,
         "## Every chain", "",
         "Summed over the entries it ran on; the largest removal effect over them, with its lens.", "",

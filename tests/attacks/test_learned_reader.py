@@ -151,7 +151,17 @@ def test_a_lens_that_forms_no_image_is_a_skip_not_a_crash(fake_lens):
     reader = attacks.load("learned-reader")
     reason = reader.skip_reason(attacks.FitContext(lens=fake_lens))
     assert reason and "lens(x, generator=g)" in reason
-    assert "has none" in reader.skip_reason(attacks.FitContext(lens=None))
+
+
+def test_with_no_lens_it_reads_with_its_sharp_start(shipped_net):
+    # The sharp scenes (lens None): no fine-tuning, the shipped start itself reads, with no PSF margin.
+    net, _, _ = shipped_net
+    reader = attacks.load("learned-reader")
+    assert reader.skip_reason(attacks.FitContext(lens=None)) is None
+    reader.fit(attacks.FitContext(lens=None, device="cpu", seed=0, profile=None, artifacts=MemoryStore()))
+    assert reader.trained is False and reader.spread_px == 0.0 and reader.curve is None
+    assert all(torch.equal(a, b) for a, b in zip(reader.net.state_dict().values(), net.state_dict().values()))
+    assert "fit_still_rising" not in reader.describe()
 
 
 @pytest.mark.slow

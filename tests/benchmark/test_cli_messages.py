@@ -47,15 +47,19 @@ def test_mask_formats_the_parser_offers_are_the_exporters():
     assert tuple(cli.MASK_FORMATS) == tuple(FORMATS)
 
 
-def test_run_help_names_exactly_the_attackers_that_run_by_default(capsys):
+def test_run_help_names_exactly_the_standard_chains_and_the_attackers_that_run_by_default(capsys):
+    from benchmark.results.ensemble_choice import STANDARD_ENSEMBLE
     with pytest.raises(SystemExit):
         cli.main(["run", "--help"])
     text = " ".join(capsys.readouterr().out.split()).replace("- ", "-")  # undo argparse's wrapping
     rows = cli.attacker_catalogue()
     default = [r["name"] for r in rows if r["runs_by_default"]]
-    named = [r["name"] for r in rows if not r["runs_by_default"]]
-    assert {"lpdr-craft", "ideal-observer"} <= set(named) and "identity" in default
-    assert "default: " + ", ".join(default) + "; run only when named: " + ", ".join(named) in text
+    named = [r["name"] for r in rows if not r["runs_by_default"] and not r["standard_chains"]]
+    assert {"lpdr-craft", "ideal-observer"} <= set(named) and "identity" in default and "lpdr" not in named
+    assert "default: the standard ensemble's chains (" + ", ".join(STANDARD_ENSEMBLE) + ")" in text
+    assert "with --all-chains: " + ", ".join(default) + ", every reader after every restorer" in text
+    assert "; run only when named: " + ", ".join(named) in text
+    assert all(r["standard_chains"] == [c for c in STANDARD_ENSEMBLE if r["name"] in c.split(">")] for r in rows)
     assert "one long native call" in text  # --budget-s says what it cannot stop
 
 
@@ -81,7 +85,8 @@ def test_list_text_shows_threat_model_and_default(capsys):
     assert cli.main(["list"]) == 0
     lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.startswith("  ")}
     assert "lens-access" in lines["ideal-observer"] and " named " in lines["ideal-observer"]
-    assert "sensor-access" in lines["identity"] and " default " in lines["identity"]
+    assert "sensor-access" in lines["identity"] and " all-chains " in lines["identity"]
+    assert "lens-access" in lines["learned-reader"] and " standard " in lines["learned-reader"]
 
 
 # ---- run arguments --------------------------------------------------------------------------------

@@ -11,12 +11,24 @@ import weakref
 import torch
 
 import attacks
-from benchmark.runner.evaluation import Attacked, PlateSet, Target, gallery_windows, run_restorers
+from benchmark.runner.evaluation import Attacked, PlateSet, ReadyReader, Target, gallery_windows, run_restorers
 from benchmark.store.profiles import get_profile
 from benchmark.runner.rows import RowBuilder
 from benchmark.runner.config import RunConfig
 from benchmark.scenes import load_scenes
 from benchmark.runner.sensing import to_tensor
+
+
+class _Blind(attacks.Reader):
+    """Reads nothing: a chain that makes the evaluation restore the windows (it restores none no chain reads)."""
+    name = "blind"
+    threat_model = attacks.ThreatModel.SENSOR_ACCESS
+
+    def read(self, images, hints=None):
+        return [[] for _ in range(images.shape[0])]
+
+
+READERS = [ReadyReader(_Blind(), None, {"name": "blind"})]
 
 
 def test_the_kept_scene_does_not_hold_the_restored_batch():
@@ -29,7 +41,8 @@ def test_the_kept_scene_does_not_hold_the_restored_batch():
     out = Attacked()
     restorers = [attacks.load("raw")]
     gone = weakref.ref(restorers[0])
-    run_restorers(target, restorers, {}, cfg, RowBuilder(cfg, "fake", 0, {"lens": "fake"}, {"device": "cpu"}), out)
+    run_restorers(target, restorers, {}, cfg, RowBuilder(cfg, "fake", 0, {"lens": "fake"}, {"device": "cpu"}), out,
+                  READERS)
     # Consumed: nothing of the evaluation holds a scored restorer (or its inference session) any more.
     assert restorers == [] and gone() is None
     kept = out.restored["raw"]
@@ -135,7 +148,8 @@ def test_scored_frames_are_gone_before_the_windows_are_restored():
     target = Target("fake", scenes, sensor.clone(), sensor.clone(), attacks.FitContext(), None, None, plates=plates)
     counter = _FrameCounter(tuple(sensor.shape))
     out = Attacked()
-    run_restorers(target, [counter], {}, cfg, RowBuilder(cfg, "fake", 0, {"lens": "fake"}, {"device": "cpu"}), out)
+    run_restorers(target, [counter], {}, cfg, RowBuilder(cfg, "fake", 0, {"lens": "fake"}, {"device": "cpu"}), out,
+                  READERS)
     assert counter.alive_during_windows, "the windows were restored"
     # alive: the local `sensor`, the target's sensor and sharp scenes; not the restored batch
     assert set(counter.alive_during_windows) == {3}
