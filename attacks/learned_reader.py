@@ -16,7 +16,8 @@ noise), shipped in the package (``attacks/weights/learned-reader-sharp-s0.*``, m
 benchmark pretrain-attacker learned-reader``), and is fine-tuned on the lens until its held-out
 accuracy flattens (``attacks.plate_reader_training``; the curve is kept with the weights and in
 ``describe()``, a fit stopped while still rising is flagged). Weights are cached per (lens, plate
-format, budget, pre-trained weights, seed). Without shipped weights for the plate format (another
+format, budget, pre-trained weights, fit seed: 0 by default, so a fixed lens is fitted once for every
+run seed). Without shipped weights for the plate format (another
 ``--plate-format``), it pre-trains here first: the full pre-training for quick and paper, the
 profile's own tiny budget for smoke.
 """
@@ -99,6 +100,9 @@ class LearnedReader(Reader):
         use_shipped: Start from the package's pre-trained weights (False: pre-train here first).
         use_shipped_fit: Load a fit the package ships for this lens and key (``ship-lens``) instead of
             fine-tuning (False: fine-tune here unless the cache holds the fit).
+        fit_seed: Seed of the fit's draws (plates, noise, order). The default 0 makes the fit a function of
+            the lens alone, so a fixed lens is fitted once for every run seed (its cache key holds no run
+            seed); None: the run's seed (``ctx.seed``), one fit per seed.
 
     Attributes (after ``fit``): ``curve`` (the fine-tuning's held-out curve, None when loaded from a
     cache written without one), ``trained`` (False: weights came from the cache), ``shipped``.
@@ -111,8 +115,10 @@ class LearnedReader(Reader):
     # In the standard ensemble (benchmark.results.ensemble_choice.STANDARD_ENSEMBLE); --all-chains adds it too.
     run_by_default: ClassVar[bool] = True
 
-    def __init__(self, min_width_px: int = 8, use_shipped: bool = True, use_shipped_fit: bool = True) -> None:
+    def __init__(self, min_width_px: int = 8, use_shipped: bool = True, use_shipped_fit: bool = True,
+                 fit_seed: int | None = 0) -> None:
         self.min_width_px = min_width_px
+        self.fit_seed = fit_seed
         self.use_shipped = use_shipped
         self.use_shipped_fit = use_shipped_fit
         self.fit_key: dict[str, Any] | None = None
@@ -152,7 +158,8 @@ class LearnedReader(Reader):
         self.budget = BUDGETS.get(profile, BUDGETS["quick"])
         # Without shipped weights a smoke run (or no profile) starts from its own tiny pre-training:
         # the full one took 25 minutes on one of 2 loaded cores.
-        net, start = self._start(ctx.seed, self.budget if profile in (None, "smoke") else PRETRAIN_BUDGET)
+        seed = ctx.seed if self.fit_seed is None else self.fit_seed
+        net, start = self._start(seed, self.budget if profile in (None, "smoke") else PRETRAIN_BUDGET)
         if lens is None:  # the sharp scenes themselves: the start was trained on sharp plates, read with it
             self.spread_px, self.budget, self.trained = 0.0, None, False
             self.net = net.to(ctx.device).eval()
@@ -160,7 +167,7 @@ class LearnedReader(Reader):
         psf = lens.psf().detach().cpu()
         self.spread_px, half = psf_radius_px(psf), psf.shape[-1] // 2
         key = {"attack": self.name, "budget": self.budget.to_dict(), "lens": lens_key(lens), "format": self.plate_format,
-               "start": start, "seed": ctx.seed}
+               "start": start, "seed": seed}
         self.fit_key = key
         data = None if ctx.artifacts is None else ctx.artifacts.load(self.name, key)
         if data is None and self.use_shipped_fit:  # e.g. the shipped gp lens's fit (``ship-lens``)
@@ -174,8 +181,8 @@ class LearnedReader(Reader):
                 data = None
         if data is None:
             camera = self._camera(ctx)
-            held_out = held_out_set(camera, self.budget, self.spread_px, half, self.plate_format, ctx.seed)
-            self.curve = train_reader(net, [camera], self.budget, self.spread_px, half, self.plate_format, ctx.seed,
+            held_out = held_out_set(camera, self.budget, self.spread_px, half, self.plate_format, seed)
+            self.curve = train_reader(net, [camera], self.budget, self.spread_px, half, self.plate_format, seed,
                                       held_out)
             self.trained = True
             if ctx.artifacts is not None:
@@ -229,7 +236,7 @@ class LearnedReader(Reader):
 
     def describe(self) -> dict[str, Any]:
         """Budget, plate format, PSF spread, where the start weights came from and the fit's curve."""
-        described = {**super().describe(), "plate_format": self.plate_format, "spread_px": round(self.spread_px, 3),
+        described = {**super().describe(), "fit_seed": self.fit_seed, "plate_format": self.plate_format, "spread_px": round(self.spread_px, 3),
                      "budget": None if self.budget is None else self.budget.to_dict(), "trained": self.trained,
                      "recipe": "per-slot CE, label smoothing 0.05, AdamW warm-up then cosine; stops when held-out accuracy flattens"}
         if self.shipped is not None:

@@ -125,12 +125,20 @@ def test_fit_is_deterministic_per_seed_cached_and_reads_given_boxes():
     store = MemoryStore()
     fits = []
     for seed in (0, 0, 1):
-        reader = attacks.load("learned-reader")
+        reader = LearnedReader(fit_seed=None)  # one fit per run seed
         reader.fit(attacks.FitContext(lens=lens, device="cpu", seed=seed, profile=None, artifacts=None))
         fits.append(reader)
     state = [r.net.state_dict() for r in fits]
     assert all(torch.equal(state[0][k], state[1][k]) for k in state[0])
     assert not all(torch.equal(state[0][k], state[2][k]) for k in state[0])
+    # The default: the fit depends on the lens alone, so every run seed of a fixed lens finds seed 0's fit.
+    shared = MemoryStore()
+    first_seed = attacks.load("learned-reader")
+    first_seed.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, profile=None, artifacts=shared))
+    other_seed = attacks.load("learned-reader")
+    other_seed.fit(attacks.FitContext(lens=lens, device="cpu", seed=2, profile=None, artifacts=shared))
+    assert first_seed.trained and other_seed.trained is False and first_seed.fit_key == other_seed.fit_key
+    assert all(torch.equal(a, b) for a, b in zip(first_seed.net.state_dict().values(), state[0].values()))
     first = attacks.load("learned-reader")
     first.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, profile=None, artifacts=store))
     again = attacks.load("learned-reader")
