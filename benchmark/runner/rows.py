@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from benchmark.results.ensemble import WIDTH_VALUE
 from benchmark.results.plate_scoring import PlateOutcome
 from benchmark.runner.config import RunConfig
 from benchmark.scenes import Scene
@@ -106,8 +107,9 @@ def utility_units(scenes: Sequence[Scene], per_scene_confusion: torch.Tensor) ->
 
 
 def plate_units(outcomes: Sequence[PlateOutcome]) -> Units:
-    """Per-plate outcomes: ``correct`` (1 when read exactly) and ``char_errors`` (edit distance of the
-    best read to the truth). A plate's id is ``{scene name}#{k}``, the k-th readable plate scored in
+    """Per-plate outcomes: ``correct`` (1 when read exactly), ``char_errors`` (edit distance of the
+    best read to the truth) and ``width_px`` (the plate's box width, what the ensemble's per-width
+    accuracy bins by: benchmark.results.ensemble). A plate's id is ``{scene name}#{k}``, the k-th readable plate scored in
     that scene (or plate window), in the order benchmark.results.plate_scoring.score_scene scores them."""
     seen: dict[str, int] = {}
     names = []
@@ -117,4 +119,5 @@ def plate_units(outcomes: Sequence[PlateOutcome]) -> Units:
         names.append(f"{o.scene}#{k}")
     return Units.from_names("plate", names, {
         "correct": [int(o.correct) for o in outcomes],
-        "char_errors": [int(round(o.cer * len(o.truth))) for o in outcomes]})
+        "char_errors": [int(round(o.cer * len(o.truth))) for o in outcomes],
+        WIDTH_VALUE: [int(o.width_px) for o in outcomes]})

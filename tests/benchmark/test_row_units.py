@@ -61,7 +61,7 @@ def test_plate_units_number_the_plates_of_each_scene():
                 PlateOutcome("s/b@x0y0p1", "QQ111", 50, "", False, False, 1.0)]
     units = plate_units(outcomes)
     assert units.names() == ("s/a#0", "s/a#1", "s/b@x0y0p1#0")
-    assert units.values == {"correct": (1, 0, 0), "char_errors": (0, 1, 5)}
+    assert units.values == {"correct": (1, 0, 0), "char_errors": (0, 1, 5), "width_px": (40, 40, 50)}
 
 
 def test_units_reject_what_they_cannot_pair():
