@@ -28,7 +28,7 @@ from attacks.plates.detect_craft import detect_craft
 from attacks.plates.detect_opencv import detect_opencv
 from attacks.plates.easyocr_models import load_easyocr
 from attacks.plates.memo import content_key, ocr_memo, vehicles_memo
-from attacks.plates.ocr import OcrResult, apply_format, normalise, read_plates
+from attacks.plates.ocr import FEATURE_BACKEND, OcrResult, apply_format, normalise, read_plates
 from attacks.plates.vehicles import expand_box, oracle_vehicles, segmentation_vehicles
 
 __all__ = ["Lpdr", "LpdrCraft", "LpdrOracle", "PlateReaderBase", "StageTrace", "content_key"]
@@ -119,7 +119,10 @@ class PlateReaderBase(Reader):
     def describe(self) -> dict[str, Any]:
         options = ("plate_detector", "vehicle_margin", "plate_band_top", "min_vehicle_width_px", "plate_format",
                    "min_chars", "target_width_px", "max_mag")
-        return {**super().describe(), "vehicles": self.vehicle_source, **{k: getattr(self, k) for k in options}}
+        # The OCR convolutions' backend policy ("auto": the faster on this machine, decided on first use and
+        # logged; the same reads either way, to float rounding: attacks.plates.ocr_onnx).
+        return {**super().describe(), "vehicles": self.vehicle_source, **{k: getattr(self, k) for k in options},
+                "ocr_features": FEATURE_BACKEND}
 
     def read(self, images: Tensor, hints: ReadHints | None = None) -> list[list[PlateRead]]:
         """Read the plates of every image; see ``Reader.read``. Also sets ``last_trace``.

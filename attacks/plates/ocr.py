@@ -30,9 +30,10 @@ PLATE_ALPHABET = "ABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789"
 OCR_HEIGHT_PX = 64
 """Height the crop is upscaled to before reading: english_g2's input height."""
 
-FEATURE_BACKEND = "onnx"
-"""Where the recognizer's convolutions run by default: "onnx" (ONNX Runtime on the CPU, torch elsewhere or
-if the export fails; ``attacks.plates.ocr_onnx``) or "torch"."""
+FEATURE_BACKEND = "auto"
+"""Where the recognizer's convolutions run by default: "auto" (on the CPU the faster of ONNX Runtime and torch
+on this machine, timed once per process; ``attacks.plates.ocr_onnx``), "onnx" (torch elsewhere or if the
+export fails) or "torch"."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -222,7 +223,7 @@ def recognize_rows(ocr: Any, rows: dict[int, np.ndarray], backend: str | None = 
     Args:
         ocr: An ``easyocr.Reader``.
         rows: Key -> (h, w) uint8 single-channel crop (``prepare_crop``), h, w >= 1.
-        backend: Where the convolutions run, "onnx" or "torch" (None: ``FEATURE_BACKEND``).
+        backend: Where the convolutions run, "auto", "onnx" or "torch" (None: ``FEATURE_BACKEND``).
 
     Returns:
         Key -> (raw string, confidence in [0, 1]) for every crop the recognizer returned a line for.

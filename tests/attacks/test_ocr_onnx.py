@@ -59,3 +59,40 @@ def test_a_failed_export_falls_back_to_torch(monkeypatch, caplog):
         assert ocr_onnx.feature_extractor(model, "onnx") is model.FeatureExtraction
     assert "no exporter here" in caplog.text
     assert ocr_onnx.feature_extractor(model, "torch") is model.FeatureExtraction
+
+
+DELAY_S = 0.5
+
+
+def test_auto_keeps_whichever_backend_the_probe_times_faster(monkeypatch):
+    # An injected delay (DELAY_S, more than either takes here) in one backend: "auto" keeps the other, decides once, and says what it timed.
+    model = _model()
+    torch_features = model.FeatureExtraction
+    session = ocr_onnx.feature_extractor(model, "onnx")
+    for slow in ("onnx", "torch"):
+        monkeypatch.setattr(ocr_onnx, "_CHOSEN", {})
+        if slow == "onnx":
+            monkeypatch.setitem(ocr_onnx._SESSIONS, id(torch_features), (torch_features, _Delayed(session)))
+        else:  # a slow torch module of its own (its session is exported from it: the sleep is not traced)
+            monkeypatch.setattr(model, "FeatureExtraction", _Delayed(torch_features))
+        chosen = ocr_onnx.feature_extractor(model, "auto")
+        fast = "torch" if slow == "onnx" else "onnx"
+        assert ocr_onnx.choices()["backend"] == fast
+        probe = ocr_onnx.choices()["probe_s"]
+        assert probe[slow] >= DELAY_S > probe[fast]
+        assert (chosen is model.FeatureExtraction) == (fast == "torch")
+        assert ocr_onnx.feature_extractor(model, "auto") is chosen  # decided once per process
+        monkeypatch.undo()
+
+
+class _Delayed(torch.nn.Module):
+    """A feature extractor slowed by DELAY_S a call."""
+
+    def __init__(self, inner):
+        super().__init__()
+        self.inner = inner
+
+    def forward(self, x):
+        import time
+        time.sleep(DELAY_S)
+        return self.inner(x)
