@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from typing import Any
 
 import torch
@@ -53,7 +54,7 @@ def choices() -> dict[str, Any]:
 def _probe(features: nn.Module, session: OnnxModel) -> tuple[str, dict[str, float]]:
     """The faster of torch and ONNX Runtime on ``PROBE_SHAPE`` (fastest of interleaved rounds, after a warm-up)."""
     x = torch.rand(PROBE_SHAPE, generator=torch.Generator().manual_seed(0))
-    runs = {"torch": features, "onnx": session}
+    runs: dict[str, Callable[[torch.Tensor], Any]] = {"torch": features, "onnx": session}
     best = {name: float("inf") for name in runs}
     with torch.no_grad():
         for name, run in runs.items():
