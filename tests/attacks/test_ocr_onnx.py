@@ -66,15 +66,17 @@ DELAY_S = 0.5
 
 def test_auto_keeps_whichever_backend_the_probe_times_faster(monkeypatch):
     # An injected delay (DELAY_S, more than either takes here) in one backend: "auto" keeps the other, decides once, and says what it timed.
-    model = _model()
-    torch_features = model.FeatureExtraction
-    session = ocr_onnx.feature_extractor(model, "onnx")
+    from types import SimpleNamespace
+    shared = _model()  # EasyOCR's recognizer, shared by the tests: never patched itself
+    torch_features = shared.FeatureExtraction
+    session = ocr_onnx.feature_extractor(shared, "onnx")
     for slow in ("onnx", "torch"):
         monkeypatch.setattr(ocr_onnx, "_CHOSEN", {})
         if slow == "onnx":
+            model = shared
             monkeypatch.setitem(ocr_onnx._SESSIONS, id(torch_features), (torch_features, _Delayed(session)))
         else:  # a slow torch module of its own (its session is exported from it: the sleep is not traced)
-            monkeypatch.setattr(model, "FeatureExtraction", _Delayed(torch_features))
+            model = SimpleNamespace(FeatureExtraction=_Delayed(torch_features))
         chosen = ocr_onnx.feature_extractor(model, "auto")
         fast = "torch" if slow == "onnx" else "onnx"
         assert ocr_onnx.choices()["backend"] == fast
