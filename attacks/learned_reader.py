@@ -167,7 +167,7 @@ class LearnedReader(Reader):
         psf = lens.psf().detach().cpu()
         self.spread_px, half = psf_radius_px(psf), psf.shape[-1] // 2
         key = {"attack": self.name, "budget": self.budget.to_dict(), "lens": lens_key(lens), "format": self.plate_format,
-               "start": start, "seed": seed}
+               "start": start, "seed": seed, "keeps": "best-evaluation"}
         self.fit_key = key
         data = None if ctx.artifacts is None else ctx.artifacts.load(self.name, key)
         if data is None and self.use_shipped_fit:  # e.g. the shipped gp lens's fit (``ship-lens``)
@@ -200,7 +200,7 @@ class LearnedReader(Reader):
             return net, {"shipped": shipped.path.name, "sha256": shipped.provenance["sha256"]}
         curve = pretrain(net, self.plate_format, seed, pretrain_budget)
         return net, {"pretrained_here": {**pretrained_key(self.plate_format, seed), "budget": pretrain_budget.to_dict()},
-                     "held_out": curve.accuracy[-1:]}
+                     "held_out": curve.accuracy[curve.kept:][:1]}
 
     @staticmethod
     def build(fmt: str, seed: int) -> PlateCNN:

@@ -9,6 +9,10 @@ when the mean exact-plate accuracy over the bins has not risen by ``min_gain`` o
 ``patience`` evaluations (it has flattened) or at the budget's last step. A fit stopped by the
 budget while its last ``patience`` evaluations still gained ``min_gain`` is flagged
 ``still_rising``: a privacy figure from it is an upper bound on what a longer fit would leave.
+
+The fit ends on the weights of its best held-out evaluation (``FitCurve.best_step``), not its last: on a
+blurring lens the held-out accuracy is noisy and can fall after an early peak (the shipped gp fit before
+this rule: 0.209 at step 600, 0.084 at its last, 800).
 """
 
 from __future__ import annotations
@@ -69,7 +73,8 @@ class ReaderBudget:
 @dataclasses.dataclass
 class FitCurve:
     """Held-out accuracy during a fit: ``steps[i]`` -> ``accuracy[i]`` (mean over the bins) and
-    ``per_width[i]`` ({width px: accuracy}); why it stopped; whether it was still rising."""
+    ``per_width[i]`` ({width px: accuracy}); why it stopped; whether it was still rising; the step whose
+    weights the fit kept (``best_step``: its best evaluation; a curve stored before that rule kept its last)."""
 
     steps: list[int]
     accuracy: list[float]
@@ -77,14 +82,22 @@ class FitCurve:
     stopped: str
     still_rising: bool
     seconds: float
+    best_step: int = 0
+
+    @property
+    def kept(self) -> int:
+        """The index of the evaluation whose weights the fit kept (-1: none evaluated)."""
+        return self.steps.index(self.best_step) if self.best_step in self.steps else len(self.steps) - 1
 
     def to_dict(self) -> dict[str, Any]:
         return {**dataclasses.asdict(self), "per_width": [{str(k): v for k, v in d.items()} for d in self.per_width]}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FitCurve:
-        return cls(list(d["steps"]), list(d["accuracy"]), [{int(k): float(v) for k, v in p.items()} for p in d["per_width"]],
-                   str(d["stopped"]), bool(d["still_rising"]), float(d["seconds"]))
+        steps = list(d["steps"])
+        return cls(steps, list(d["accuracy"]), [{int(k): float(v) for k, v in p.items()} for p in d["per_width"]],
+                   str(d["stopped"]), bool(d["still_rising"]), float(d["seconds"]),
+                   int(d.get("best_step", steps[-1] if steps else 0)))
 
 
 def held_out_set(camera: Camera | None, budget: ReaderBudget, spread_px: float, psf_half_px: int, fmt: str,
@@ -133,6 +146,7 @@ def _train(net: PlateCNN, cameras: list[Camera | None], budget: ReaderBudget, sp
         optimizer, lambda s: min(1.0, (s + 1) / warmup) * 0.5 * (1.0 + math.cos(math.pi * min(s, total) / total)))
     criterion = nn.CrossEntropyLoss(label_smoothing=0.05)
     curve = FitCurve([], [], [], "budget", False, 0.0)
+    best: dict[str, Tensor] | None = None  # the weights of the best evaluation so far
     t0 = time.perf_counter()
     net.train()
     bar = tqdm(range(budget.max_steps), desc="plate reader fit", unit="step", leave=False)
@@ -150,12 +164,17 @@ def _train(net: PlateCNN, cameras: list[Camera | None], budget: ReaderBudget, sp
             curve.per_width.append(per_width)
             curve.accuracy.append(float(np.mean(list(per_width.values()))) if per_width else 0.0)
             bar.set_postfix(held_out=f"{curve.accuracy[-1]:.3f}")
+            if best is None or curve.accuracy[-1] > max(curve.accuracy[:-1]):
+                best = {k: v.detach().clone() for k, v in net.state_dict().items()}
+                curve.best_step = step + 1
             log.info("plate reader step %d: held-out %.3f (%.0f s)", step + 1, curve.accuracy[-1], time.perf_counter() - t0)
             if _flattened(curve.accuracy, budget):
                 curve.stopped = "flattened"
                 break
     curve.still_rising = curve.stopped == "budget" and _gain(curve.accuracy, budget.patience) >= budget.min_gain
     curve.seconds = round(time.perf_counter() - t0, 1)
+    if best is not None and curve.best_step != curve.steps[-1]:
+        net.load_state_dict(best)
     net.eval()
     return curve
 

@@ -72,7 +72,7 @@ def ship_reader(args: argparse.Namespace) -> int:
     path = write_shipped(f"learned-reader-sharp-s{args.seed}", LearnedReader.name, pretrained_key(PLATE_FORMAT, args.seed),
                          pack_weights(net, curve), made, args.out)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB) and its provenance; held-out exact-plate accuracy "
-          + ", ".join(f"{w} px {a:.2f}" for w, a in curve.per_width[-1].items())
+          + ", ".join(f"{w} px {a:.2f}" for w, a in curve.per_width[curve.kept].items())
           + f" after {curve.steps[-1]} steps ({curve.stopped}{', still rising' if curve.still_rising else ''})")
     return 0
 

@@ -141,8 +141,9 @@ def ship_learned_reader(ctx: Any, args: argparse.Namespace, made: dict[str, Any]
     reader.fit(ctx)
     assert reader.net is not None and reader.fit_key is not None and reader.curve is not None
     curve = reader.curve
-    check = {"steps": curve.steps[-1] if curve.steps else 0, "still_rising": curve.still_rising,
-             "held_out_per_width": {str(k): v for k, v in (curve.per_width or [{}])[-1].items()}}
+    check = {"steps": curve.steps[-1] if curve.steps else 0, "kept_step": curve.best_step,
+             "still_rising": curve.still_rising,
+             "held_out_per_width": {str(k): v for k, v in (curve.per_width[curve.kept] if curve.per_width else {}).items()}}
     fit_s = round(time.perf_counter() - t0, 1) if reader.trained else None
     return write_shipped(
         f"{reader.name}-{args.lens}-{args.profile}-s{args.seed}", reader.name, reader.fit_key,

@@ -116,7 +116,7 @@ def test_shipped_start_matches_its_recorded_curve(shipped_net):
     assert curve is not None and shipped.provenance["made"]["curve"]["accuracy"] == curve.accuracy
     held = held_out_set(None, PRETRAIN_BUDGET, 0.0, 0, PLATE_FORMAT, 0)
     for width, batch in held.items():
-        assert plate_accuracy(net, batch) == pytest.approx(curve.per_width[-1][width], abs=1.5 / len(batch.texts))
+        assert plate_accuracy(net, batch) == pytest.approx(curve.per_width[curve.kept][width], abs=1.5 / len(batch.texts))
 
 
 def test_fit_is_deterministic_per_seed_cached_and_reads_given_boxes():
@@ -182,3 +182,31 @@ def test_on_the_ideal_lens_it_reads_more_quick_plates_than_lpdr_oracle_and_never
     assert read["learned-reader"] > read["lpdr-oracle"], read
     # Bins with enough plates to tell are checked against the lens's T = 1 ceiling by the study itself.
     assert record["consistency"]["violations"] == []
+
+
+def test_a_fit_keeps_the_weights_of_its_best_held_out_evaluation(monkeypatch):
+    # Held-out scores scripted per evaluation (0.5, 0.9, 0.2, 0.1): the fit ends on the weights it had at
+    # the second, and says so; the curve itself is what was measured.
+    import attacks.plate_reader_training as training
+    from attacks.plate_reader_training import ReaderBudget, held_out_set, train_reader
+
+    budget = ReaderBudget(max_steps=4, batch_size=4, lr=1e-2, widths_px=(24.0, 64.0), eval_every=1, eval_plates=2,
+                          patience=10)
+    held = held_out_set(None, budget, 0.0, 0, PLATE_FORMAT, 0)
+    scripted, snapshots, calls = [0.5, 0.9, 0.2, 0.1], [], []
+
+    def scored(net, batch):
+        if len(calls) % len(held) == 0:
+            snapshots.append({k: v.clone() for k, v in net.state_dict().items()})
+        calls.append(1)
+        return scripted[(len(calls) - 1) // len(held)]
+    monkeypatch.setattr(training, "plate_accuracy", scored)
+    net = LearnedReader.build(PLATE_FORMAT, 0)
+    curve = train_reader(net, [None], budget, 0.0, 0, PLATE_FORMAT, 0, held)
+    assert curve.accuracy == pytest.approx(scripted) and curve.best_step == 2 and curve.kept == 1
+    state = net.state_dict()
+    assert all(torch.equal(state[k], snapshots[1][k]) for k in state)
+    assert not all(torch.equal(state[k], snapshots[3][k]) for k in state)
+    # A curve stored before the rule has no best_step: it kept its last evaluation's weights.
+    old = {k: v for k, v in curve.to_dict().items() if k != "best_step"}
+    assert training.FitCurve.from_dict(old).best_step == 4 and training.FitCurve.from_dict(old).kept == 3
