@@ -159,7 +159,8 @@ class LearnedReader(Reader):
         # Without shipped weights a smoke run (or no profile) starts from its own tiny pre-training:
         # the full one took 25 minutes on one of 2 loaded cores.
         seed = ctx.seed if self.fit_seed is None else self.fit_seed
-        net, start = self._start(seed, self.budget if profile in (None, "smoke") else PRETRAIN_BUDGET)
+        pretrain_budget = self.budget if profile in (None, "smoke") else PRETRAIN_BUDGET
+        net, start = self._start(seed, pretrain_budget)
         if lens is None:  # the sharp scenes themselves: the start was trained on sharp plates, read with it
             self.spread_px, self.budget, self.trained = 0.0, None, False
             self.net = net.to(ctx.device).eval()
@@ -178,7 +179,8 @@ class LearnedReader(Reader):
                 self.curve, self.trained = _unpack(net, data), False
             except (RuntimeError, KeyError, ValueError) as exc:
                 log.warning("%s: cached weights do not fit the network (%s); fitting again", self.name, exc)
-                data = None
+                data, self.shipped_fit = None, None
+                net, _ = self._start(seed, pretrain_budget)  # a failed load may have overwritten some weights
         if data is None:
             camera = self._camera(ctx)
             held_out = held_out_set(camera, self.budget, self.spread_px, half, self.plate_format, seed)

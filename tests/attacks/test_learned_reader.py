@@ -210,3 +210,22 @@ def test_a_fit_keeps_the_weights_of_its_best_held_out_evaluation(monkeypatch):
     # A curve stored before the rule has no best_step: it kept its last evaluation's weights.
     old = {k: v for k, v in curve.to_dict().items() if k != "best_step"}
     assert training.FitCurve.from_dict(old).best_step == 4 and training.FitCurve.from_dict(old).kept == 3
+
+
+def test_cached_weights_that_do_not_fit_are_refitted_from_a_clean_start():
+    # A cached artifact whose tensors all load but one (wrong shape): the fit starts again from the shipped
+    # start, not from the weights the failed load already copied, so it equals a fit from an empty cache.
+    from safetensors.torch import save as save_safetensors
+    lens = lenses.load("ideal")
+    store = MemoryStore()
+    first = attacks.load("learned-reader")
+    first.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, profile=None, artifacts=store))
+    (name,) = store.items
+    state = {k: torch.full_like(v, 0.5) for k, v in first.net.state_dict().items()}
+    last = sorted(state)[-1]
+    state[last] = torch.zeros(3, 1)
+    store.items[name] = save_safetensors(state)
+    again = attacks.load("learned-reader")
+    again.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, profile=None, artifacts=store))
+    assert again.trained and again.shipped_fit is None
+    assert all(torch.equal(a, b) for a, b in zip(again.net.state_dict().values(), first.net.state_dict().values()))
