@@ -14,8 +14,8 @@ If the export or ONNX Runtime fails, torch is used and the reason logged.
 Which is faster depends on the machine (the ratio benchmark passed on an AVX2 machine and is asked to hold
 on any), so the default backend "auto" decides per machine: on first use in a process it times both on a
 fixed probe batch (``PROBE_SHAPE``, fastest of ``PROBE_ROUNDS`` interleaved rounds, about a second) and
-keeps the faster; ``choices()`` holds the decision and its timings, which the readers' ``describe()``
-records in the row settings.
+keeps the faster, and logs it; ``choices()`` holds the decision and its timings. The readers' ``describe()``
+records the policy ("auto"), not the choice: it is made at the first read, after the row settings are taken.
 """
 
 from __future__ import annotations

@@ -99,8 +99,7 @@ def main(args: argparse.Namespace) -> int:
         made["command"] += " --reader-only"
         lens = lenses.load(args.lens, profile=profile, seed=args.seed, device="cpu", cache_dir=cache_root())
         ctx = fit_context(lens, run_config(args.lens, profile, args.seed), args.seed, None)
-        weights = ship_learned_reader(ctx, args, made)
-        print(f"wrote {weights} ({weights.stat().st_size / 1e6:.1f} MB) and its provenance")
+        ship_learned_reader(ctx, args, made)
         return 0
     run = codesign_run(args.lens, profile, args.seed, use_shipped=False)
     cached = run.load()
@@ -128,8 +127,7 @@ def main(args: argparse.Namespace) -> int:
         None if args.out is None else args.out / "attack_weights")
     print(f"wrote {weights} ({weights.stat().st_size / 1e6:.1f} MB) and its provenance; check PSNR "
           f"{check['psnr_in_db']:.2f} -> {check['psnr_out_db']:.2f} dB on {check['crops']} crops")
-    weights = ship_learned_reader(ctx, args, made)
-    print(f"wrote {weights} ({weights.stat().st_size / 1e6:.1f} MB) and its provenance")
+    ship_learned_reader(ctx, args, made)
     return 0
 
 
@@ -145,7 +143,9 @@ def ship_learned_reader(ctx: Any, args: argparse.Namespace, made: dict[str, Any]
              "still_rising": curve.still_rising,
              "held_out_per_width": {str(k): v for k, v in (curve.per_width[curve.kept] if curve.per_width else {}).items()}}
     fit_s = round(time.perf_counter() - t0, 1) if reader.trained else None
-    return write_shipped(
+    weights = write_shipped(
         f"{reader.name}-{args.lens}-{args.profile}-s{args.seed}", reader.name, reader.fit_key,
         pack_weights(reader.net, curve), {**made, "trained_here": reader.trained, "fit_s": fit_s, "check": check},
         None if args.out is None else args.out / "attack_weights")
+    print(f"wrote {weights} ({weights.stat().st_size / 1e6:.1f} MB) and its provenance")
+    return weights

@@ -108,7 +108,7 @@ def run(cfg: RunConfig, executor: str = "local", selection: Selection | None = N
     failures = load_failure_rows(cfg, selection.failures)
     done: dict[str, TaskResult] = {}
 
-    def write_partial(task: Task, result: TaskResult) -> None:
+    def on_result(task: Task, result: TaskResult) -> None:
         done[task.key] = result
         if on_task is not None:
             on_task(task)
@@ -120,7 +120,7 @@ def run(cfg: RunConfig, executor: str = "local", selection: Selection | None = N
             "task_results": str(directory)}))
 
     listening = partial is not None or on_task is not None
-    results = executors.get(executor).run(planned, cfg, directory, write_partial if listening else None)
+    results = executors.get(executor).run(planned, cfg, directory, on_result if listening else None)
     return collect(planned, results, directory, failures)
 
 
