@@ -6,7 +6,7 @@ only where the study used the lens's own spec: ``benchmark.results.observer.publ
 at the bin's lower edge minus the ensemble's accuracy in the bin (``benchmark.results.ensemble``). The
 ceiling rises with width, so its value at the lower edge is the least over the bin and the gap is a
 lower bound on the bin's mean gap. Plate units without recorded widths give one bin, every readable
-plate (>= READABLE_MIN_WIDTH_PX): the gap "at 32 px". Its 95 % interval combines the ceiling's
+plate (>= LEGACY_READABLE_MIN_WIDTH_PX): the gap "at 32 px". Its 95 % interval combines the ceiling's
 Monte-Carlo interval and the ensemble's Wilson interval (low = ceiling low - ensemble high).
 
 Flags (``Flag.kind``):
@@ -34,12 +34,11 @@ from typing import Any
 import numpy as np
 
 from benchmark.results import stats
-from benchmark.results.ensemble import Accuracy, PlateEnsemble, plate_ensemble, seed_scenes
+from benchmark.results.ensemble import Accuracy, PlateEnsemble, plate_ensemble, pooled_min_width, seed_scenes
 from benchmark.results.entries import Entry
 from benchmark.results.observer.ceiling import CeilingCurve
 from benchmark.results.observer.consistency import BinAccuracy, check_consistency
 from benchmark.results.observer.published import study_record, t1_curve
-from benchmark.results.plate_scoring import READABLE_MIN_WIDTH_PX
 from benchmark.results.schema import FIT_STILL_RISING, Row, threat_models
 
 __all__ = ["CEILING_ALARM", "FLAG_KINDS", "GAP_ALARM", "GAP_WIDTHS_PX", "Flag", "Gap", "attack_gaps", "entry_flags",
@@ -117,11 +116,11 @@ def _ceiling_at(curve: CeilingCurve, width_px: float) -> tuple[float, tuple[floa
 
 
 def attack_gaps(ensemble: PlateEnsemble, curve: CeilingCurve) -> list[Gap]:
-    """The gap per width bin of the ensemble (one pooled bin from READABLE_MIN_WIDTH_PX where its plates
-    carry no widths), for bins whose lower edge the curve tabulates."""
+    """The gap per width bin of the ensemble (one pooled bin from its smallest pooled width where its
+    plates carry no widths), for bins whose lower edge the curve tabulates."""
     if ensemble.bins is None:
         bins: list[tuple[float, float, Accuracy, bool]] = [
-            (float(READABLE_MIN_WIDTH_PX), math.inf, ensemble.accuracy, True)]
+            (ensemble.min_width_px(), math.inf, ensemble.accuracy, True)]
     else:
         bins = [(b.low_px, b.high_px, b.accuracy, False) for b in ensemble.bins]
     out = []
@@ -160,6 +159,7 @@ def _rising(row: Row) -> bool:
 
 def _row_accuracies(lens: str, rows: Sequence[Row]) -> list[BinAccuracy]:
     """Each reader and chain pooled over its seeds on every readable plate (as the entry check does)."""
+    low = pooled_min_width(rows)
     counts: dict[str, list[int]] = {}
     for row in rows:
         acc, n = row.metrics.get("plate_acc"), row.metrics.get("n_plates")
@@ -167,7 +167,7 @@ def _row_accuracies(lens: str, rows: Sequence[Row]) -> list[BinAccuracy]:
             tally = counts.setdefault(row.attack, [0, 0])
             tally[0] += round(acc * n)
             tally[1] += int(n)
-    return [BinAccuracy(attack, lens, READABLE_MIN_WIDTH_PX, math.inf, hits / n, stats.wilson_interval(hits, n), n)
+    return [BinAccuracy(attack, lens, low, math.inf, hits / n, stats.wilson_interval(hits, n), n)
             for attack, (hits, n) in counts.items() if n]
 
 

@@ -7,9 +7,11 @@ attackers, and are left out as ``Entry.worst_case`` leaves them out). Its accura
 seeds as the leaderboard pools plates (hits over plates of every seed, with the Wilson 95 %
 interval of that count; the per-seed accuracies give the seed spread, shown apart from it). Each
 chain's contribution: the share of ensemble-read plates it read, and the share only it read.
-Where the plate units carry each plate's width (a ``width_px`` value), the accuracy is also given
-per width bin (``benchmark.results.plate_scoring.WIDTH_BINS_PX``); entries published before that
-carry no widths, and their ensemble is over every readable plate (>= READABLE_MIN_WIDTH_PX) only.
+Where the plate units carry each plate's width (a ``width_px`` value), the pooled accuracy (and
+every paired comparison built on ``seed_plates``) counts the readable plates, those at least
+``READABLE_MIN_WIDTH_PX`` wide, and the accuracy is also given per width bin over every scored plate
+(``benchmark.results.plate_scoring.WIDTH_BINS_PX``, from 8 px); entries published before that carry
+no widths, and their ensemble is over every plate they scored (>= LEGACY_READABLE_MIN_WIDTH_PX) only.
 
 Scenes. A scene counts at its best restorer (rows of kind ``restorer`` with per-scene units,
 paired by scene name within a seed): the ensemble PSNR is the mean over scenes of the per-scene
@@ -30,11 +32,12 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from benchmark.results import stats
-from benchmark.results.plate_scoring import READABLE_MIN_WIDTH_PX, WIDTH_BINS_PX
+from benchmark.results.plate_scoring import LEGACY_READABLE_MIN_WIDTH_PX, READABLE_MIN_WIDTH_PX, WIDTH_BINS_PX
 from benchmark.results.schema import Row, Units
 
 __all__ = ["Accuracy", "Contribution", "PlateEnsemble", "SceneEnsemble", "SeedPlates", "WidthBin", "WIDTH_VALUE",
-           "chain_accuracy", "plate_ensemble", "scene_ensemble", "seed_plates", "seed_scenes", "strongest_chain"]
+           "chain_accuracy", "plate_ensemble", "pooled_min_width", "scene_ensemble", "seed_plates", "seed_scenes",
+           "strongest_chain"]
 
 # Kinds of row whose outcomes join the ensemble (``reference`` rows are not attackers).
 READER_KINDS = ("reader", "chain")
@@ -104,6 +107,14 @@ class SeedPlates:
         """(len(names),) bool: read by at least one chain."""
         return self.read.any(axis=0) if self.chains else np.zeros(len(self.names), dtype=bool)
 
+    def readable(self) -> SeedPlates:
+        """The plates at least READABLE_MIN_WIDTH_PX wide (all of them where widths are not recorded)."""
+        if self.widths is None:
+            return self
+        keep = np.flatnonzero(self.widths >= READABLE_MIN_WIDTH_PX)
+        return dataclasses.replace(self, names=tuple(self.names[i] for i in keep), read=self.read[:, keep],
+                                   widths=self.widths[keep])
+
     def of_chains(self, chains: Iterable[str]) -> SeedPlates:
         """The same plates with only the given chains (those of them this seed has)."""
         keep = [i for i, c in enumerate(self.chains) if c in set(chains)]
@@ -152,9 +163,10 @@ class PlateEnsemble:
 
     Attributes:
         chains: Every chain that joined it (on at least one seed), in the order the rows name them.
-        per_seed: The plates of each seed.
-        accuracy: The ensemble's accuracy over every scored (readable) plate.
-        bins: Per width bin (bins without plates left out), or None when the units record no widths.
+        per_seed: The readable plates of each seed (``SeedPlates.readable``).
+        accuracy: The ensemble's accuracy over the readable plates.
+        bins: Per width bin over every scored plate (bins without plates left out), or None when the
+            units record no widths.
         contributions: One per chain, in `chains` order.
     """
 
@@ -169,8 +181,12 @@ class PlateEnsemble:
         return tuple(p.seed for p in self.per_seed)
 
     def min_width_px(self) -> float:
-        """The smallest plate width the accuracy covers: READABLE_MIN_WIDTH_PX without recorded widths."""
-        return float(READABLE_MIN_WIDTH_PX) if self.bins is None else min(b.low_px for b in self.bins)
+        """The smallest plate width the pooled accuracy covers: LEGACY_READABLE_MIN_WIDTH_PX where the
+        units record no widths or scored no plate below it (runs before plates were scored from 8 px),
+        else READABLE_MIN_WIDTH_PX."""
+        if self.bins is None or min(b.low_px for b in self.bins) >= LEGACY_READABLE_MIN_WIDTH_PX:
+            return float(LEGACY_READABLE_MIN_WIDTH_PX)
+        return float(READABLE_MIN_WIDTH_PX)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -204,6 +220,18 @@ class SceneEnsemble:
         return f"{self.mean:.{digits}f}{spread} [{self.interval[0]:.{digits}f}, {self.interval[1]:.{digits}f}]"
 
 
+def pooled_min_width(rows: Iterable[Row]) -> int:
+    """The smallest plate width the pooled plate figures of `rows` (plate_acc, n_plates) count:
+    READABLE_MIN_WIDTH_PX where a reader row's units record a plate narrower than
+    LEGACY_READABLE_MIN_WIDTH_PX, else the legacy width (rows of runs that scored plates from 32 px)."""
+    for row in rows:
+        u = row.units
+        if row.kind in READER_KINDS and u is not None and u.unit == "plate" and WIDTH_VALUE in u.values:
+            if any(w < LEGACY_READABLE_MIN_WIDTH_PX for w in u.values[WIDTH_VALUE]):
+                return READABLE_MIN_WIDTH_PX
+    return LEGACY_READABLE_MIN_WIDTH_PX
+
+
 def _units_rows(rows: Iterable[Row], kinds: Sequence[str], unit: str, value: str,
                 attacks: set[str] | None) -> dict[int, list[Row]]:
     """seed -> the ok rows of `kinds` (in `attacks` when given) whose units are of `unit` and hold `value`."""
@@ -225,10 +253,12 @@ def _aligned(rows: Sequence[Row]) -> tuple[list[str], list[list[int]]]:
     return order, [[{k: i for i, k in enumerate(n)}[name] for name in order] for n in names]
 
 
-def seed_plates(rows: Iterable[Row], seed: int, attacks: set[str] | None = None) -> SeedPlates | None:
+def seed_plates(rows: Iterable[Row], seed: int, attacks: set[str] | None = None,
+                readable_only: bool = True) -> SeedPlates | None:
     """The plates of `seed` that every reader chain with per-plate units scored, and which chain read
-    each (None when no chain of that seed carries per-plate units). Rows disagreeing on a plate's
-    width are an error naming both."""
+    each (None when no chain of that seed carries per-plate units): the readable ones
+    (``SeedPlates.readable``), or every scored one with `readable_only` False. Rows disagreeing on a
+    plate's width are an error naming both."""
     found = _units_rows(rows, READER_KINDS, "plate", "correct", attacks).get(seed)
     if not found:
         return None
@@ -244,7 +274,8 @@ def seed_plates(rows: Iterable[Row], seed: int, attacks: set[str] | None = None)
                 raise ValueError(f"seed {seed}: rows {found[0].lens}/{found[0].attack} and {r.lens}/{r.attack} "
                                  f"give the same plates different {WIDTH_VALUE}")
         widths = columns[0]
-    return SeedPlates(seed, tuple(names), tuple(r.attack for r in found), read, widths)
+    plates = SeedPlates(seed, tuple(names), tuple(r.attack for r in found), read, widths)
+    return plates.readable() if readable_only else plates
 
 
 def _bins(per_seed: Sequence[SeedPlates], bins_px: Sequence[float]) -> tuple[WidthBin, ...]:
@@ -266,12 +297,13 @@ def plate_ensemble(rows: Iterable[Row], attacks: set[str] | None = None,
     chains), or None when no chain carries per-plate units. Seeds are taken in increasing order."""
     rows = list(rows)
     seeds = sorted(_units_rows(rows, READER_KINDS, "plate", "correct", attacks))
-    per_seed = [p for s in seeds if (p := seed_plates(rows, s, attacks)) is not None]
-    if not per_seed:
+    scored = [p for s in seeds if (p := seed_plates(rows, s, attacks, readable_only=False)) is not None]
+    if not scored:
         return None
+    per_seed = [p.readable() for p in scored]
     chains = tuple(dict.fromkeys(c for p in per_seed for c in p.chains))
     accuracy = Accuracy.of([(int(p.ensemble.sum()), len(p.names)) for p in per_seed])
-    bins = _bins(per_seed, bins_px) if all(p.widths is not None for p in per_seed) else None
+    bins = _bins(scored, bins_px) if all(p.widths is not None for p in scored) else None
     contributions = []
     for chain in chains:
         read = only = 0

@@ -25,7 +25,7 @@ from benchmark.runner.isolation import attempt, describe, own_context, private
 from benchmark.runner.intervals import plate_intervals, scene_intervals
 from benchmark.results.metrics import psnr, ssim
 from benchmark.runner.diagnostics.native_memory import release_free_memory
-from benchmark.results.plate_scoring import PlateOutcome, readable, score_scene, summarise
+from benchmark.results.plate_scoring import PlateOutcome, pooled, readable, score_scene, summarise
 from benchmark.runner.rows import RowBuilder, plate_units, scene_units
 from benchmark.runner.config import RunConfig
 from benchmark.scenes import Scene
@@ -422,9 +422,10 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
     # A chain needs what its strongest part needs (a known-PSF restorer's lens access, say).
     threat = reader.threat_model if restorer is None else attacks.ThreatModel.strongest(
         reader.threat_model, out.threat_models[restorer])
-    row = rows.row(kind, {**summarise(outcomes), **timing}, attack=chain, restorer=restorer, reader=reader.name,
+    # The row's pooled figures count the readable plates; its units hold every scored plate (from 8 px).
+    row = rows.row(kind, {**summarise(pooled(outcomes)), **timing}, attack=chain, restorer=restorer, reader=reader.name,
                    threat_model=threat.value, settings=settings, notes=dict(ready.notes))
-    plate_intervals(row, outcomes)
+    plate_intervals(row, pooled(outcomes))
     row.set_units(plate_units(outcomes))
     chain_rows.append(row)
     out.reader_plates.setdefault(reader.name, []).extend(

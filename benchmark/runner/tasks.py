@@ -35,14 +35,14 @@ from benchmark.codesign.trainer import TRAINER_VERSION
 from benchmark.runner.evaluation import Attacked, PlateSet, Target, attempt, fit_readers, read_sensor, run_reader, run_restorers
 from benchmark.runner.intervals import utility_intervals
 from benchmark.runner.planning import AttackerRef, Task, fit_task
-from benchmark.results.plate_scoring import readable
+from benchmark.results.plate_scoring import READABLE_MIN_WIDTH_PX, SCORED_MIN_WIDTH_PX, WIDTH_BINS_PX, scored
 from benchmark.scenes.plate_spectrum import cached_plate_spectrum
 from benchmark.store.provenance import provenance
 from benchmark.runner.rows import RowBuilder, training_facts, utility_units
 from benchmark.runner.pictures import plate_gallery, sample_grid, training_curves
 from benchmark.runner.config import RunConfig, training_scenes
-from benchmark.scenes import Scene, load_scene, load_scenes, plate_entropy_bits
-from benchmark.scenes.windows import plate_windows, window_scene
+from benchmark.scenes import Plate, Scene, load_scene, load_scenes, plate_entropy_bits
+from benchmark.scenes.windows import WidthQuota, plate_windows, window_scene
 from benchmark.results.schema import Row, RowError
 from benchmark.runner.sensing import sense, sense_windows, to_tensor, train_pairs_factory
 from benchmark.runner.utility_measure import has_labels, segmenter, utility_net_for, utility_scores
@@ -54,7 +54,8 @@ log = logging.getLogger(__name__)
 
 BOUND_CURVE_WIDTHS_PX = (4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192)
 # The plate set stops drawing frames here even short of its target (a scene set with few plates).
-MAX_PLATE_FRAMES = 2000
+# The plate set fills every width bin below this (issue: >= 50 plates per bin from 8 to 64 px).
+QUOTA_BELOW_PX = 64
 RESULT_FILE = "result.json"
 
 
@@ -215,29 +216,39 @@ def plate_set(cfg: RunConfig, seed: int, lens: lenses.Lens | None) -> PlateSet |
     """The plate windows of `seed` (benchmark.scenes.windows) seen through `lens` (None: the sharp
     windows); None when the profile reads plates on the n_val scenes themselves.
 
-    Val frames are drawn in order, one at a time (only the windows are kept), until the profile's
-    `min_readable_plates` are found; each window is at least the utility net's sliding window.
+    Val frames are drawn in order, one at a time (only the windows are kept), and a scored plate is
+    taken while its width bin (WIDTH_BINS_PX) holds fewer than the profile's `plates_per_width_bin`,
+    until every bin below QUOTA_BELOW_PX is full or `plate_frames` frames are drawn. So the small
+    plates, rare in a street scene, are as many as the large ones, and the pooled accuracy weighs
+    width bins about equally. Each window is at least the utility net's sliding window.
     """
-    target = cfg.profile.min_readable_plates
-    if target <= 0:
+    profile = cfg.profile
+    if profile.plates_per_width_bin <= 0:
         return None
-    min_size = window_for(cfg.profile.image_size, cfg.profile.train_crop)[0]
+    quota = WidthQuota(WIDTH_BINS_PX, profile.plates_per_width_bin, QUOTA_BELOW_PX)
+    min_size = window_for(profile.image_size, profile.train_crop)[0]
+
+    def take(plate: Plate) -> bool:
+        return scored(plate) and quota.take(plate.box_xyxy[2] - plate.box_xyxy[0])
+
     scenes: list[Scene] = []
     sharp: list[torch.Tensor] = []
     sensor: list[torch.Tensor] = []
     n_frames = 0
-    while len(scenes) < target and n_frames < MAX_PLATE_FRAMES:
-        frame = load_scene(cfg.scenes, "val", n_frames, cfg.profile.image_size, seed)
+    while not quota.full and n_frames < profile.plate_frames:
+        frame = load_scene(cfg.scenes, "val", n_frames, profile.image_size, seed)
         n_frames += 1
-        windows = plate_windows([frame], readable, min_size)
+        windows = plate_windows([frame], take, min_size)
         if not windows:
             continue
         scenes += [window_scene(frame, w) for w in windows]
         sharp += [torch.from_numpy(np.ascontiguousarray(s.image)).permute(2, 0, 1) for s in scenes[-len(windows):]]
         sensor += sharp[-len(windows):] if lens is None else sense_windows(lens, [frame], windows, seed, cfg.device)
-    if len(scenes) < target:
-        log.warning("plate set of seed %d: %d readable plates in %d frames, short of %d", seed, len(scenes), n_frames,
-                    target)
+    if not quota.full:
+        short = {f"{low} px": c for low, c in zip(WIDTH_BINS_PX, quota.counts) if low < QUOTA_BELOW_PX
+                 and c < quota.per_bin}
+        log.warning("plate set of seed %d: %d frames drawn (the profile's plate_frames) left width bins short of "
+                    "%d plates: %s", seed, n_frames, quota.per_bin, short)
     # Equal window sizes next to each other, so that restorers and readers batch them.
     order = sorted(range(len(scenes)), key=lambda i: (tuple(sharp[i].shape), i))
     return PlateSet([scenes[i] for i in order], [sharp[i] for i in order], [sensor[i] for i in order], n_frames)
@@ -257,7 +268,9 @@ def _lens(cfg: RunConfig, name: str, seed: int) -> lenses.Lens:
 
 def _builder(cfg: RunConfig, lens_name: str, seed: int, lens: lenses.Lens | None, **extra: Any) -> RowBuilder:
     settings = {"lens": lens.current_spec().to_dict() if lens is not None else lens_name,
-                "profile": cfg.profile.to_dict(), "scenes": cfg.scenes, "seed": seed, **extra}
+                "profile": cfg.profile.to_dict(), "scenes": cfg.scenes, "seed": seed,
+                # Which plates get outcomes and which count in the pooled plate figures.
+                "plates_px": {"scored_from": SCORED_MIN_WIDTH_PX, "readable_from": READABLE_MIN_WIDTH_PX}, **extra}
     return RowBuilder(cfg, lens_name, seed, settings, provenance(cfg.device))
 
 

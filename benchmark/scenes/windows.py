@@ -12,9 +12,10 @@ How the window's sensor image is made equal to the full frame's inside it:
 
 from __future__ import annotations
 
+import bisect
 import math
-from collections.abc import Callable
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
 
 from .records import Box, Plate, Scene, Vehicle
 
@@ -43,6 +44,41 @@ class PlateWindow:
     def size_hw(self) -> tuple[int, int]:
         x0, y0, x1, y1 = self.box_xyxy
         return y1 - y0, x1 - x0
+
+
+@dataclass
+class WidthQuota:
+    """At most `per_bin` plates per width bin (lower edges `bins_px`, the last bin open above; plates
+    narrower than the first edge are never taken). `full` once every bin whose lower edge is below
+    `required_below_px` holds its quota: the bins a plate set must fill; wider bins take what comes.
+    """
+
+    bins_px: Sequence[float]
+    per_bin: int
+    required_below_px: float
+    counts: list[int] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if list(self.bins_px) != sorted(self.bins_px) or not self.bins_px:
+            raise ValueError(f"width bins must be increasing lower edges, got {tuple(self.bins_px)}")
+        self.counts = [0] * len(self.bins_px)
+
+    def bin_of(self, width_px: float) -> int | None:
+        """The bin holding `width_px` (None below the first edge)."""
+        i = bisect.bisect_right(self.bins_px, width_px) - 1
+        return i if i >= 0 else None
+
+    def take(self, width_px: float) -> bool:
+        """Count a plate of `width_px` when its bin has room; whether it was taken."""
+        i = self.bin_of(width_px)
+        if i is None or self.counts[i] >= self.per_bin:
+            return False
+        self.counts[i] += 1
+        return True
+
+    @property
+    def full(self) -> bool:
+        return all(c >= self.per_bin for low, c in zip(self.bins_px, self.counts) if low < self.required_below_px)
 
 
 def window_box(target: Box, frame_hw: tuple[int, int], min_size_px: tuple[int, int],

@@ -1,8 +1,8 @@
 """The `ideal-observer` reader beside EasyOCR (`lpdr-oracle`): exact-plate accuracy per plate width.
 
 Both readers read the same plates: the plate windows of the quick profile's synthetic validation
-frames (`benchmark.runner.tasks.plate_set`: every readable plate, >= 32 px wide, with its vehicle and
-context), seen through each lens as the run sees them (`benchmark.runner.sensing.sense_windows`, the
+frames (`benchmark.runner.tasks.plate_set`: scored plates from 8 px wide, a quota per width bin, with
+their vehicle and context), seen through each lens as the run sees them (`benchmark.runner.sensing.sense_windows`, the
 run's noise), each lens built from its quick leaderboard entry's spec (co-designed coefficients
 included, never retrained). Both are given ground truth where the run gives it (`lpdr-oracle` the
 vehicle boxes, `ideal-observer` the plate boxes). Accuracy is pooled per width bin of
@@ -12,7 +12,7 @@ violations logged as errors and kept in the record.
 
 Writes leaderboard/studies/ideal_observer_readers.json; the ceiling chart draws it
 (benchmark.results.charts.ideal_observer). Cost: the ideal observer's beam search takes seconds per plate,
-so the sample is a few dozen plates per lens (`n_plates`), stated in the record.
+so the sample is a few plates per width bin and lens (`n_plates`), stated in the record.
 """
 
 from __future__ import annotations
@@ -78,11 +78,11 @@ def summarise(records: list[dict], lens_specs: dict[str, dict], study: dict | No
     return {"lenses": out, "consistency": check}
 
 
-def run_reader_study(names: tuple[str, ...] = LENSES, readers: tuple[str, ...] = READERS, n_plates: int = 40,
+def run_reader_study(names: tuple[str, ...] = LENSES, readers: tuple[str, ...] = READERS, n_plates: int = 4,
                      seed: int = 0, out_json: Path | None = OUT_JSON, cache_dir: Path | None = None) -> dict:
-    """Read about `n_plates` plates per lens (every readable plate of the frames drawn until that many
-    are found) with each reader; write and return the record (module docstring)."""
-    profile = dataclasses.replace(get_profile("quick"), min_readable_plates=n_plates)
+    """Read `n_plates` plates per width bin and lens (the run's plate set with that quota) with each
+    reader; write and return the record (module docstring)."""
+    profile = dataclasses.replace(get_profile("quick"), plates_per_width_bin=n_plates)
     cfg = RunConfig(lenses=list(names), attacks=list(readers), scenes="synthetic", profile=profile, seeds=[seed],
                     cache_dir=cache_dir or cache_root())
     specs = quick_lens_specs()
@@ -139,7 +139,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(prog="python -m benchmark.studies.reader_study",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--lens", action="append", help=f"quick-leaderboard lens (repeat; default {LENSES})")
-    parser.add_argument("--plates", type=int, default=40, help="readable plates per lens (at least)")
+    parser.add_argument("--plates", type=int, default=4, help="plates per width bin and lens (at most)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=OUT_JSON, help=f"record to write (default {OUT_JSON})")
     parser.add_argument("--combine", type=Path, nargs="+", help="only combine these records into --out")

@@ -12,7 +12,9 @@ import pytest
 from benchmark.publish import findings
 from benchmark.results import stats
 from benchmark.results.attack_gap import attack_gaps, lens_flags
-from benchmark.results.ensemble import chain_accuracy, plate_ensemble, scene_ensemble, strongest_chain
+from benchmark.results.ensemble import (chain_accuracy, plate_ensemble, pooled_min_width, scene_ensemble,
+                                       strongest_chain)
+from benchmark.results.plate_scoring import LEGACY_READABLE_MIN_WIDTH_PX, READABLE_MIN_WIDTH_PX
 from benchmark.results.entries import make_entry
 from benchmark.results.observer.ceiling import CeilingCurve
 from benchmark.results.schema import FIT_STILL_RISING, Row, Units
@@ -97,7 +99,16 @@ def test_width_bins_where_plates_record_widths():
     assert ensemble is not None and ensemble.bins is not None
     got = {(b.low_px, b.high_px): (b.accuracy.hits, b.accuracy.n) for b in ensemble.bins}
     assert got == {(16.0, 32.0): (1, 2), (32.0, 64.0): (2, 2), (64.0, math.inf): (2, 2)}
-    assert ensemble.min_width_px() == 16
+    # The pooled accuracy and the chains' shares count only the readable plates (>= the measured start).
+    readable = [w >= READABLE_MIN_WIDTH_PX for w in widths]
+    union = [x or y for x, y in zip([0, 0, 1, 0, 1, 1], [1, 0, 0, 1, 0, 0])]
+    assert (ensemble.accuracy.hits, ensemble.accuracy.n) == (sum(u for u, r in zip(union, readable) if r),
+                                                             sum(readable))
+    assert ensemble.min_width_px() == READABLE_MIN_WIDTH_PX
+    assert pooled_min_width([a, b]) == READABLE_MIN_WIDTH_PX
+    # Plates recorded only from 32 px (runs before plates were scored from 8 px) pool from 32 px.
+    wide = [_reader("lpdr-oracle", 0, [0, 1], widths=[32, 40])]
+    assert plate_ensemble(wide).min_width_px() == pooled_min_width(wide) == LEGACY_READABLE_MIN_WIDTH_PX
     b_bad = _reader("identity>lpdr-oracle", 0, [1, 0, 0, 1, 0, 0], kind="chain", widths=[16, 20, 32, 40, 64, 99])
     with pytest.raises(ValueError, match="identity>lpdr-oracle.*width_px"):
         plate_ensemble([a, b_bad])

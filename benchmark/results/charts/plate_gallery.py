@@ -12,7 +12,7 @@ from matplotlib.figure import Figure
 
 from attacks import PlateRead
 from benchmark.results.charts import new_figure, save_figure
-from benchmark.results.plate_scoring import readable, score_scene
+from benchmark.results.plate_scoring import readable, score_scene, scored
 from benchmark.scenes import Scene
 
 __all__ = ["plate_gallery_figure", "write_plate_gallery"]
@@ -109,11 +109,11 @@ def plate_gallery_figure(images: Mapping[str, torch.Tensor], scenes: Sequence[Sc
 
 
 def _read_texts(scenes: Sequence[Scene], per_image: Sequence[Sequence[PlateRead]]) -> dict[tuple[int, int], str]:
-    """(scene index, plate index) -> text the runner's scoring matched to that readable plate."""
+    """(scene index, plate index) -> text the runner's scoring matched to that scored plate."""
     texts = {}
     for i, (scene, image_reads) in enumerate(zip(scenes, per_image)):
-        readable_ids = [k for k, p in enumerate(scene.plates) if readable(p)]
-        for k, outcome in zip(readable_ids, score_scene(list(image_reads), scene)):
+        scored_ids = [k for k, p in enumerate(scene.plates) if scored(p)]
+        for k, outcome in zip(scored_ids, score_scene(list(image_reads), scene)):
             texts[(i, k)] = outcome.read
     return texts
 

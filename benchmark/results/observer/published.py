@@ -8,9 +8,10 @@ ceiling is "not computed". Both specs are compared as today's lens code parses t
 the code has since dropped (`simulation.oversample`) or a default left out does not hide a match.
 
 Consistency. Every reader and chain of an entry is checked against its lens's T = 1 plate ceiling
-(`consistency.check_consistency`). Entries carry each chain's accuracy over all readable plates
-(>= READABLE_MIN_WIDTH_PX wide), not per width, so the entry check uses one bin [32 px, inf): a
-mixture of widths cannot beat the largest ceiling over them. A run checks its own per-plate
+(`consistency.check_consistency`). Entries carry each chain's pooled accuracy over its readable
+plates, so the entry check uses one bin from the smallest width they count
+(`benchmark.results.ensemble.pooled_min_width`: 32 px for entries scored before plates were scored
+from 8 px): a mixture of widths cannot beat the largest ceiling over them. A run checks its own per-plate
 records (plates.csv) per width bin (`run_violations`). Beyond the study's widest tabulated width the
 curve is compared at its tabulated part (`ceiling_high_in_bin`): a ceiling still rising there could
 only raise a false alarm, never hide a violation.
@@ -28,7 +29,8 @@ from typing import Any
 from benchmark.results.entries import LEADERBOARD, Entry
 from benchmark.results.observer.ceiling import CeilingCurve
 from benchmark.results.observer.consistency import BinAccuracy, Violation, check_consistency
-from benchmark.results.plate_scoring import READABLE_MIN_WIDTH_PX, WIDTH_BINS_PX
+from benchmark.results.ensemble import pooled_min_width
+from benchmark.results.plate_scoring import WIDTH_BINS_PX
 from benchmark.results.stats import wilson_interval
 from lenses import LensSpecError, parse_spec
 
@@ -111,7 +113,8 @@ def t1_curve(record: Mapping[str, Any] | None) -> CeilingCurve | None:
 
 def entry_accuracies(entry: Entry) -> list[BinAccuracy]:
     """Each reader and chain of `entry` pooled over its seeds: plates read over readable plates, one
-    bin [READABLE_MIN_WIDTH_PX, inf), with its Wilson 95 % interval. Chains without plates are left out."""
+    bin [pooled_min_width, inf), with its Wilson 95 % interval. Chains without plates are left out."""
+    low = pooled_min_width(entry.rows)
     out = []
     for chain in entry.chains():
         if chain.kind not in ("reader", "chain"):
@@ -124,7 +127,7 @@ def entry_accuracies(entry: Entry) -> list[BinAccuracy]:
             hits += round(acc * count)
             n += int(count)
         if n:
-            out.append(BinAccuracy(chain.attack, entry.lens, READABLE_MIN_WIDTH_PX, math.inf, hits / n,
+            out.append(BinAccuracy(chain.attack, entry.lens, low, math.inf, hits / n,
                                    wilson_interval(hits, n), n))
     return out
 
