@@ -4,7 +4,8 @@ One run of every registered lens (or those named) at the profile's seeds with th
 (`benchmark.results.ensemble_choice.STANDARD_ENSEMBLE`), whose entries then replace the published ones
 whole (`leaderboard.publish(..., replace=True)`): nothing measured by an older version stays beside
 the new rows. The run's tasks are cached as they finish, so the same command after an interruption
-resumes where it stopped (at the same commit: the run's folder is keyed by it).
+resumes where it stopped, also after a commit that changed only docs, tests or the publishing code
+(the run's folder is keyed by `benchmark.store.provenance.code_version`, not by the commit).
 
 Progress is a bar over the plan's *estimated seconds* (`benchmark.runner.task_costs`: the median
 measured cost of the same work in the cache, else the shipped table): each finished task advances it

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from benchmark.store.cache import config_hash
-from benchmark.store.provenance import git_commit
+from benchmark.store.provenance import code_version
 from benchmark.runner.config import RunConfig
 
 TASK_VERSION = 2
@@ -75,8 +75,11 @@ def fit_task(seed: int, lens: str, restorer: AttackerRef, deps: tuple[str, ...] 
 
 
 def run_directory(cfg: RunConfig, restorers: list[AttackerRef], readers: list[AttackerRef]) -> Path:
-    """Where a run's task results live: one folder per (configuration, code version)."""
-    key = config_hash({"version": TASK_VERSION, "commit": git_commit(), "lenses": cfg.lenses,
+    """Where a run's task results live: one folder per (configuration, code version). The code version
+    (``benchmark.store.provenance.code_version``) changes with any file the results depend on, not
+    with docs or tests, so an interrupted run resumes after such a commit; each row still carries the
+    commit of the process that computed it."""
+    key = config_hash({"version": TASK_VERSION, "code": code_version(), "lenses": cfg.lenses,
                        "restorers": [r.identity for r in restorers], "readers": [r.identity for r in readers],
                        "scenes": cfg.scenes, "profile": cfg.profile.to_dict(), "seeds": cfg.seeds,
                        "device": cfg.device, "plate_format": cfg.plate_format, "frames": cfg.frames,

@@ -217,15 +217,17 @@ def plate_set(cfg: RunConfig, seed: int, lens: lenses.Lens | None) -> PlateSet |
     windows); None when the profile reads plates on the n_val scenes themselves.
 
     Val frames are drawn in order, one at a time (only the windows are kept), and a scored plate is
-    taken while its width bin (WIDTH_BINS_PX) holds fewer than the profile's `plates_per_width_bin`,
-    until every bin below QUOTA_BELOW_PX is full or `plate_frames` frames are drawn. So the small
-    plates, rare in a street scene, are as many as the large ones, and the pooled accuracy weighs
-    width bins about equally. Each window is at least the utility net's sliding window.
+    taken while its width bin (WIDTH_BINS_PX) holds fewer than the profile's `plates_per_width_bin`
+    (`plates_per_wide_bin` from QUOTA_BELOW_PX, whose windows are the large ones), until every bin
+    below QUOTA_BELOW_PX is full or `plate_frames` frames are drawn. So the small plates, rare in a
+    street scene, are as many as the large ones. Each window is at least the utility net's sliding
+    window.
     """
     profile = cfg.profile
     if profile.plates_per_width_bin <= 0:
         return None
-    quota = WidthQuota(WIDTH_BINS_PX, profile.plates_per_width_bin, QUOTA_BELOW_PX)
+    quota = WidthQuota(WIDTH_BINS_PX, [profile.plates_per_width_bin if low < QUOTA_BELOW_PX
+                                       else profile.plates_per_wide_bin for low in WIDTH_BINS_PX], QUOTA_BELOW_PX)
     min_size = window_for(profile.image_size, profile.train_crop)[0]
 
     def take(plate: Plate) -> bool:
@@ -246,9 +248,9 @@ def plate_set(cfg: RunConfig, seed: int, lens: lenses.Lens | None) -> PlateSet |
         sensor += sharp[-len(windows):] if lens is None else sense_windows(lens, [frame], windows, seed, cfg.device)
     if not quota.full:
         short = {f"{low} px": c for low, c in zip(WIDTH_BINS_PX, quota.counts) if low < QUOTA_BELOW_PX
-                 and c < quota.per_bin}
+                 and c < profile.plates_per_width_bin}
         log.warning("plate set of seed %d: %d frames drawn (the profile's plate_frames) left width bins short of "
-                    "%d plates: %s", seed, n_frames, quota.per_bin, short)
+                    "%d plates: %s", seed, n_frames, profile.plates_per_width_bin, short)
     # Equal window sizes next to each other, so that restorers and readers batch them.
     order = sorted(range(len(scenes)), key=lambda i: (tuple(sharp[i].shape), i))
     return PlateSet([scenes[i] for i in order], [sharp[i] for i in order], [sensor[i] for i in order], n_frames)

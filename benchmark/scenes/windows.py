@@ -48,19 +48,22 @@ class PlateWindow:
 
 @dataclass
 class WidthQuota:
-    """At most `per_bin` plates per width bin (lower edges `bins_px`, the last bin open above; plates
-    narrower than the first edge are never taken). `full` once every bin whose lower edge is below
-    `required_below_px` holds its quota: the bins a plate set must fill; wider bins take what comes.
+    """At most ``per_bin[i]`` plates in width bin i (lower edges `bins_px`, the last bin open above;
+    plates narrower than the first edge are never taken). `full` once every bin whose lower edge is
+    below `required_below_px` holds its quota: the bins a plate set must fill; wider bins take what
+    comes up to theirs.
     """
 
     bins_px: Sequence[float]
-    per_bin: int
+    per_bin: Sequence[int]
     required_below_px: float
     counts: list[int] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         if list(self.bins_px) != sorted(self.bins_px) or not self.bins_px:
             raise ValueError(f"width bins must be increasing lower edges, got {tuple(self.bins_px)}")
+        if len(self.per_bin) != len(self.bins_px):
+            raise ValueError(f"one quota per width bin: {len(self.per_bin)} quotas for {len(self.bins_px)} bins")
         self.counts = [0] * len(self.bins_px)
 
     def bin_of(self, width_px: float) -> int | None:
@@ -71,14 +74,14 @@ class WidthQuota:
     def take(self, width_px: float) -> bool:
         """Count a plate of `width_px` when its bin has room; whether it was taken."""
         i = self.bin_of(width_px)
-        if i is None or self.counts[i] >= self.per_bin:
+        if i is None or self.counts[i] >= self.per_bin[i]:
             return False
         self.counts[i] += 1
         return True
 
     @property
     def full(self) -> bool:
-        return all(c >= self.per_bin for low, c in zip(self.bins_px, self.counts) if low < self.required_below_px)
+        return all(c >= q for low, c, q in zip(self.bins_px, self.counts, self.per_bin) if low < self.required_below_px)
 
 
 def window_box(target: Box, frame_hw: tuple[int, int], min_size_px: tuple[int, int],

@@ -52,8 +52,9 @@ class Profile:
     # Plate set (benchmark.runner.tasks.plate_set): with a quota, plates are read on windows around
     # their vehicles (benchmark.scenes.windows), cut from val frames drawn in order until every width
     # bin from 8 to 64 px holds `plates_per_width_bin` scored plates or `plate_frames` frames are drawn;
-    # wider bins take plates up to the same quota from those frames.
+    # wider bins take up to `plates_per_wide_bin` from those frames (their windows are 2-3x larger).
     plates_per_width_bin: int = 0  # per seed; 0: read plates on the n_val scenes themselves
+    plates_per_wide_bin: int = 0
     plate_frames: int = 0          # the most val frames drawn for the plate set
 
     def to_dict(self) -> dict:
@@ -79,7 +80,8 @@ PROFILES: dict[str, Profile] = {
                 pretrain_eval_every=4,
                 optics_lr=2e-2, seg_lr=6e-4, deb_lr=1e-3, bound_scenes=30,
                 restorer_steps=40, nafnet_width=8, nafnet_enc_blocks=(1, 1), nafnet_middle_blocks=1,
-                nafnet_dec_blocks=(1, 1), plates_per_width_bin=1, plate_frames=4),
+                nafnet_dec_blocks=(1, 1), plates_per_width_bin=1, plates_per_wide_bin=1,
+                plate_frames=4),
         Profile("quick", _measured("the CPU default", "quick"),
                 image_size=(512, 1024), n_val=64, n_train=64, train_crop=(128, 128), batch_size=8,
                 utility_model="b0", adversary_width=32, pretrain_steps=1800, codesign_steps=200,
@@ -88,7 +90,7 @@ PROFILES: dict[str, Profile] = {
                 optics_lr=2e-2, seg_lr=6e-4, deb_lr=1e-3, bound_scenes=300,
                 restorer_steps=200, nafnet_width=16, nafnet_enc_blocks=(1, 1, 2), nafnet_middle_blocks=2,
                 nafnet_dec_blocks=(1, 1, 1), plates_per_width_bin=50,
-                plate_frames=1000),
+                plates_per_wide_bin=25, plate_frames=1000),
         Profile("paper", "the paper's settings, for a GPU: full-size scenes, 512x512 crops, batch 16, 200 epochs",
                 image_size=(1024, 2048), n_val=500, n_train=2975, train_crop=(512, 512), batch_size=16,
                 utility_model="b0", adversary_width=64, pretrain_steps=40000, codesign_steps=200 * 186,

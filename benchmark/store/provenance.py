@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import functools
+import hashlib
 import os
 import platform
 import subprocess
@@ -32,6 +33,37 @@ def git_commit() -> str:
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return commit + ("-dirty" if dirty else "")
+
+
+# What a run's task results do not depend on: the commands that publish and study them, the CLI
+# that builds the run's configuration (itself part of every run's key) and the chart drawing.
+CODE_VERSION_EXCLUDES = ("benchmark/publish/", "benchmark/studies/", "benchmark/results/charts/", "benchmark/cli.py")
+
+
+@functools.lru_cache(maxsize=1)
+def code_version() -> str:
+    """SHA-256 (16 hex digits) over the files of the packages ``lenses``, ``attacks`` and ``benchmark``
+    (sources, shipped weights and tables; not CODE_VERSION_EXCLUDES, ``__pycache__`` or ``*.md``) and
+    the versions of the packages that shape the numbers.
+
+    Two processes with the same code version compute the same task results, whatever commit they
+    were started from: a long job (``publish``) interrupted at one commit resumes at a later one
+    that changed only docs, tests or the excluded modules. Read once per process, like git_commit.
+    """
+    return code_digest(Path(__file__).resolve().parents[2])
+
+
+def code_digest(root: Path) -> str:
+    """code_version's digest of the packages under `root`."""
+    digest = hashlib.sha256(package_versions().encode())
+    for package in ("lenses", "attacks", "benchmark"):
+        for path in sorted((root / package).rglob("*")):
+            rel = path.relative_to(root).as_posix()
+            if (not path.is_file() or "__pycache__" in path.parts or rel.endswith((".md", ".pyc"))
+                    or rel.startswith(CODE_VERSION_EXCLUDES)):
+                continue
+            digest.update(rel.encode() + b"\0" + hashlib.sha256(path.read_bytes()).digest())
+    return digest.hexdigest()[:16]
 
 
 def package_versions() -> str:

@@ -82,7 +82,8 @@ def run_reader_study(names: tuple[str, ...] = LENSES, readers: tuple[str, ...] =
                      seed: int = 0, out_json: Path | None = OUT_JSON, cache_dir: Path | None = None) -> dict:
     """Read `n_plates` plates per width bin and lens (the run's plate set with that quota) with each
     reader; write and return the record (module docstring)."""
-    profile = dataclasses.replace(get_profile("quick"), plates_per_width_bin=n_plates)
+    profile = dataclasses.replace(get_profile("quick"), plates_per_width_bin=n_plates,
+                                  plates_per_wide_bin=n_plates)
     cfg = RunConfig(lenses=list(names), attacks=list(readers), scenes="synthetic", profile=profile, seeds=[seed],
                     cache_dir=cache_dir or cache_root())
     specs = quick_lens_specs()

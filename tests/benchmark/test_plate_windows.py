@@ -137,14 +137,14 @@ def test_shape_batches_keep_order_and_group_equal_shapes():
 
 def test_quick_plate_set_fills_every_width_bin_from_8_to_64_px(tmp_path):
     """Counted from the scene generator alone (no lens): the quick profile's plate set of seed 0 holds
-    50 scored plates in each width bin from 8 to 64 px, and no bin more than 50."""
+    50 scored plates in each width bin from 8 to 64 px, and no wider bin more than 25."""
     cfg = RunConfig(["ideal"], None, "synthetic", get_profile("quick"), [0], cache_dir=tmp_path)
     plates = plate_set(cfg, 0, None)
     assert plates is not None and all(scored(s.plates[0]) for s in plates.scenes)
     widths = np.array([s.plates[0].box_xyxy[2] - s.plates[0].box_xyxy[0] for s in plates.scenes])
     counts = np.histogram(widths, [*WIDTH_BINS_PX, np.inf])[0]
     assert all(c == 50 for low, c in zip(WIDTH_BINS_PX, counts) if low < 64), counts
-    assert counts.max() <= 50 and widths.min() >= 8
+    assert all(c <= 25 for low, c in zip(WIDTH_BINS_PX, counts) if low >= 64) and widths.min() >= 8
     assert len({s.name for s in plates.scenes}) == len(plates.scenes)
     assert plates.n_frames <= get_profile("quick").plate_frames
     assert all(t.shape[1:] == s.image.shape[:2] for t, s in zip(plates.sharp, plates.scenes))
@@ -153,7 +153,7 @@ def test_quick_plate_set_fills_every_width_bin_from_8_to_64_px(tmp_path):
 
 
 def test_width_quota_takes_plates_until_the_required_bins_are_full():
-    quota = WidthQuota((8, 16, 32, 64), per_bin=2, required_below_px=32)
+    quota = WidthQuota((8, 16, 32, 64), per_bin=(2, 2, 2, 2), required_below_px=32)
     assert not quota.take(7)                      # below the first edge: never taken
     assert [quota.take(w) for w in (8, 15, 9)] == [True, True, False]  # bin [8, 16) holds 2
     assert not quota.full
@@ -161,4 +161,6 @@ def test_width_quota_takes_plates_until_the_required_bins_are_full():
     assert [quota.take(w) for w in (16, 31)] == [True, True] and quota.full  # [32, 64) is not required
     assert quota.counts == [2, 2, 0, 2]
     with pytest.raises(ValueError, match="increasing"):
-        WidthQuota((16, 8), 1, 16)
+        WidthQuota((16, 8), (1, 1), 16)
+    with pytest.raises(ValueError, match="one quota per width bin"):
+        WidthQuota((8, 16), (1,), 16)

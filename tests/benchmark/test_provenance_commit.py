@@ -30,3 +30,24 @@ def test_the_cpu_is_named_by_model_instructions_and_cores(tmp_path):
     described = provenance.describe_device("cpu")
     assert described.startswith(f"cpu:{provenance.cpu_model()} (")
     assert f"({torch.backends.cpu.get_cpu_capability()}, {os.cpu_count()} cores)" in described
+
+
+def test_code_version_follows_what_results_depend_on(tmp_path):
+    files = {"lenses/optics.py": "a", "attacks/lpdr.py": "b", "benchmark/runner/tasks.py": "c",
+             "benchmark/publish/report.py": "d", "benchmark/studies/s.py": "e", "benchmark/cli.py": "f",
+             "benchmark/results/charts/plot.py": "g", "attacks/README.md": "h", "attacks/weights/w.safetensors": "i"}
+    for rel, text in files.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
+    base = provenance.code_digest(tmp_path)
+    for rel in ("benchmark/publish/report.py", "benchmark/studies/s.py", "benchmark/cli.py",
+                "benchmark/results/charts/plot.py", "attacks/README.md"):
+        (tmp_path / rel).write_text("changed")
+        assert provenance.code_digest(tmp_path) == base, rel
+    for rel in ("lenses/optics.py", "attacks/lpdr.py", "benchmark/runner/tasks.py", "attacks/weights/w.safetensors"):
+        before = provenance.code_digest(tmp_path)
+        (tmp_path / rel).write_text("changed")
+        assert provenance.code_digest(tmp_path) != before, rel
+    (tmp_path / "benchmark/results/new.py").write_text("x")  # a new source file counts too
+    assert provenance.code_digest(tmp_path) != before
+    assert len(provenance.code_version()) == 16
