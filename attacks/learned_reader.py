@@ -56,8 +56,8 @@ BUDGETS: dict[str | None, ReaderBudget] = {
                        patience=1),
     "smoke": ReaderBudget(max_steps=20, batch_size=16, lr=1e-3, widths_px=(8.0, 200.0), eval_every=10,
                           eval_plates=8, patience=2),
-    "quick": ReaderBudget(max_steps=800, batch_size=48, lr=1e-3, widths_px=(8.0, 200.0), eval_every=100,
-                          eval_plates=32, patience=3),
+    "quick": ReaderBudget(max_steps=2400, batch_size=48, lr=1e-3, widths_px=(8.0, 200.0), eval_every=100,
+                          eval_plates=32, patience=4, min_steps=1200),
     "paper": ReaderBudget(max_steps=6000, batch_size=64, lr=1e-3, widths_px=(8.0, 200.0), eval_every=200,
                           eval_plates=128, patience=5),
 }

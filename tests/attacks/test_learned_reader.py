@@ -212,6 +212,20 @@ def test_a_fit_keeps_the_weights_of_its_best_held_out_evaluation(monkeypatch):
     assert training.FitCurve.from_dict(old).best_step == 4 and training.FitCurve.from_dict(old).kept == 3
 
 
+@pytest.mark.parametrize("min_steps, stops_at", [(0, 3), (5, 5)])
+def test_a_fit_never_stops_as_flattened_before_its_min_steps(monkeypatch, min_steps, stops_at):
+    # A flat scripted curve flattens after patience (2) evaluations; with min_steps 5 it goes on to step 5.
+    import attacks.plate_reader_training as training
+    from attacks.plate_reader_training import ReaderBudget, held_out_set, train_reader
+
+    budget = ReaderBudget(max_steps=6, batch_size=4, lr=1e-2, widths_px=(24.0, 64.0), eval_every=1, eval_plates=2,
+                          patience=2, min_steps=min_steps)
+    held = held_out_set(None, budget, 0.0, 0, PLATE_FORMAT, 0)
+    monkeypatch.setattr(training, "plate_accuracy", lambda net, batch: 0.3)
+    curve = train_reader(LearnedReader.build(PLATE_FORMAT, 0), [None], budget, 0.0, 0, PLATE_FORMAT, 0, held)
+    assert curve.steps[-1] == stops_at and curve.stopped == "flattened" and not curve.still_rising
+
+
 def test_cached_weights_that_do_not_fit_are_refitted_from_a_clean_start():
     # A cached artifact whose tensors all load but one (wrong shape): the fit starts again from the shipped
     # start, not from the weights the failed load already copied, so it equals a fit from an empty cache.
