@@ -71,7 +71,7 @@ def test_markdown_shows_each_metric_with_its_interval(tmp_path, rows):
             if name in cells:
                 assert cells[name] == f"{fmt(row.metrics[name])} [{fmt(low)}, {fmt(high)}]"
                 shown += 1
-    assert shown > 50 and "95 % interval" in md
+    assert shown > 25 and "95 % interval" in md
 
 
 def test_markdown_interval_over_seeds_spans_every_seeds_interval(tmp_path, rows):
@@ -106,8 +106,10 @@ def test_chain_threat_model_is_the_strongest_of_its_parts(tmp_path, rows):
         assert labels[r.attack] == expected
         assert lines[(r.lens, r.attack)]["threat_model"] == expected
         assert set(table[table["attack"] == r.attack]["threat_model"]) == {expected}
-    assert labels["wiener-known-psf>lpdr"] == "lens-access"
-    assert labels["nafnet-known-pairs>lpdr"] == "known-pairs"
+    # The entry holds the standard ensemble's chains: a lens-access restorer before the sensor-access lpdr, a
+    # known-pairs one before lpdr-oracle.
+    assert labels["richardson-lucy-known-psf>lpdr"] == "lens-access"
+    assert labels["nafnet-known-pairs>lpdr-oracle"] == "known-pairs"
 
 
 def test_every_line_a_chart_draws_is_in_the_table(tmp_path, rows):
@@ -117,5 +119,5 @@ def test_every_line_a_chart_draws_is_in_the_table(tmp_path, rows):
     records = [{"lens": r.lens, "attack": r.attack, "width_px": 40.0, "correct": i < r.metrics["plate_acc"] * 2}
                for r in rows if r.ok and r.metric("n_plates") for i in range(int(r.metrics["n_plates"]))]
     charted = set(width_accuracy(records)) | set(restorer_points(rows))
-    assert ("defocus", "raw>lpdr") in charted
+    assert ("defocus", "richardson-lucy-known-psf>lpdr") in charted
     assert charted - set(lines) == set()
