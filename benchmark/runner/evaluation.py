@@ -357,9 +357,20 @@ class ReadyReader:
 
 def fit_notes(described: object) -> dict[str, str]:
     """The row notes a fitted attacker's describe() gives: ``FIT_STILL_RISING`` ("true" / "false")
-    when it says whether its fit stopped while its held-out score was still improving."""
-    rising = described.get(FIT_STILL_RISING) if isinstance(described, dict) else None
-    return {FIT_STILL_RISING: "true" if rising else "false"} if isinstance(rising, bool) else {}
+    when it says whether its fit stopped while its held-out score was still improving, and
+    ``fit_stopped`` ("flattened at step 1200, kept step 900") when it gives its fit curve (``steps``,
+    ``stopped``, ``best_step``): the settings hold the description made before the fit."""
+    if not isinstance(described, dict):
+        return {}
+    notes = {}
+    rising = described.get(FIT_STILL_RISING)
+    if isinstance(rising, bool):
+        notes[FIT_STILL_RISING] = "true" if rising else "false"
+    curve = described.get("fit_curve")
+    if isinstance(curve, dict) and curve.get("steps") and "stopped" in curve:
+        kept = curve.get("best_step", curve["steps"][-1])
+        notes["fit_stopped"] = f"{curve['stopped']} at step {curve['steps'][-1]}, kept step {kept}"
+    return notes
 
 
 def fit_readers(target: Target, readers: Sequence[attacks.Reader], cfg: RunConfig) -> list[ReadyReader]:

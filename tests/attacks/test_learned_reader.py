@@ -243,3 +243,15 @@ def test_cached_weights_that_do_not_fit_are_refitted_from_a_clean_start():
     again.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, profile=None, artifacts=store))
     assert again.trained and again.shipped_fit is None
     assert all(torch.equal(a, b) for a, b in zip(again.net.state_dict().values(), first.net.state_dict().values()))
+
+
+def test_the_row_notes_say_where_the_fit_stopped_and_which_step_it_kept():
+    from benchmark.runner.evaluation import fit_notes
+    reader = attacks.load("learned-reader")
+    reader.fit(attacks.FitContext(lens=lenses.load("ideal"), device="cpu", seed=0, profile=None,
+                                  artifacts=MemoryStore()))
+    curve = reader.curve
+    notes = fit_notes(reader.describe())
+    assert notes["fit_stopped"] == f"{curve.stopped} at step {curve.steps[-1]}, kept step {curve.best_step}"
+    assert notes["fit_still_rising"] in ("true", "false")
+    assert fit_notes({"fit_curve": {"steps": [], "stopped": "budget"}}) == {} and fit_notes(None) == {}
