@@ -184,9 +184,7 @@ class PlateEnsemble:
         """The smallest plate width the pooled accuracy covers: LEGACY_READABLE_MIN_WIDTH_PX where the
         units record no widths or scored no plate below it (runs before plates were scored from 8 px),
         else READABLE_MIN_WIDTH_PX."""
-        if self.bins is None or min(b.low_px for b in self.bins) >= LEGACY_READABLE_MIN_WIDTH_PX:
-            return float(LEGACY_READABLE_MIN_WIDTH_PX)
-        return float(READABLE_MIN_WIDTH_PX)
+        return float(_pooled_from(None if self.bins is None else min(b.low_px for b in self.bins)))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -224,12 +222,17 @@ def pooled_min_width(rows: Iterable[Row]) -> int:
     """The smallest plate width the pooled plate figures of `rows` (plate_acc, n_plates) count:
     READABLE_MIN_WIDTH_PX where a reader row's units record a plate narrower than
     LEGACY_READABLE_MIN_WIDTH_PX, else the legacy width (rows of runs that scored plates from 32 px)."""
-    for row in rows:
-        u = row.units
-        if row.kind in READER_KINDS and u is not None and u.unit == "plate" and WIDTH_VALUE in u.values:
-            if any(w < LEGACY_READABLE_MIN_WIDTH_PX for w in u.values[WIDTH_VALUE]):
-                return READABLE_MIN_WIDTH_PX
-    return LEGACY_READABLE_MIN_WIDTH_PX
+    widths = [w for row in rows if row.kind in READER_KINDS and (u := row.units) is not None and u.unit == "plate"
+              for w in u.values.get(WIDTH_VALUE, ())]
+    return _pooled_from(min(widths, default=None))
+
+
+def _pooled_from(narrowest_px: float | None) -> int:
+    """Where pooled plate figures start, given the narrowest scored plate (None: widths not recorded):
+    plates narrower than the legacy start mean plates were scored from 8 px."""
+    if narrowest_px is None or narrowest_px >= LEGACY_READABLE_MIN_WIDTH_PX:
+        return LEGACY_READABLE_MIN_WIDTH_PX
+    return READABLE_MIN_WIDTH_PX
 
 
 def _units_rows(rows: Iterable[Row], kinds: Sequence[str], unit: str, value: str,

@@ -434,9 +434,10 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
     threat = reader.threat_model if restorer is None else attacks.ThreatModel.strongest(
         reader.threat_model, out.threat_models[restorer])
     # The row's pooled figures count the readable plates; its units hold every scored plate (from 8 px).
-    row = rows.row(kind, {**summarise(pooled(outcomes)), **timing}, attack=chain, restorer=restorer, reader=reader.name,
+    readable_outcomes = pooled(outcomes)
+    row = rows.row(kind, {**summarise(readable_outcomes), **timing}, attack=chain, restorer=restorer, reader=reader.name,
                    threat_model=threat.value, settings=settings, notes=dict(ready.notes))
-    plate_intervals(row, pooled(outcomes))
+    plate_intervals(row, readable_outcomes)
     row.set_units(plate_units(outcomes))
     chain_rows.append(row)
     out.reader_plates.setdefault(reader.name, []).extend(
