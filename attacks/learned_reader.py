@@ -55,11 +55,11 @@ BUDGETS: dict[str | None, ReaderBudget] = {
     None: ReaderBudget(max_steps=2, batch_size=4, lr=1e-3, widths_px=(24.0, 64.0), eval_every=1, eval_plates=2,
                        patience=1),
     "smoke": ReaderBudget(max_steps=20, batch_size=16, lr=1e-3, widths_px=(8.0, 200.0), eval_every=10,
-                          eval_plates=8, patience=2),
+                          eval_plates=8, patience=2, bands_per_batch=4),
     "quick": ReaderBudget(max_steps=2400, batch_size=48, lr=1e-3, widths_px=(8.0, 200.0), eval_every=100,
-                          eval_plates=32, patience=4, min_steps=1200),
+                          eval_plates=32, patience=4, min_steps=1200, bands_per_batch=4),
     "paper": ReaderBudget(max_steps=6000, batch_size=64, lr=1e-3, widths_px=(8.0, 200.0), eval_every=200,
-                          eval_plates=128, patience=5),
+                          eval_plates=128, patience=5, bands_per_batch=4),
 }
 """Fine-tuning budget per profile name (None: no profile, e.g. the contract test)."""
 

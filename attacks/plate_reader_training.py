@@ -2,9 +2,18 @@
 
 Recipe: cross-entropy per character slot (label smoothing 0.05), AdamW (weight decay 1e-4) warmed up
 over the first tenth of the budget's steps to ``lr``, then a cosine decay, batches of simulated plates
-(``attacks.plates.plate_sim``) of one width band each, the bands drawn log-uniform over the budget's
-width range. Every ``eval_every`` steps the reader is scored on a fixed held-out set (plates of
-each width bin of ``EVAL_WIDTHS_PX`` that fits the range, the true box, no jitter); training stops
+(``attacks.plates.plate_sim``). A batch is ``bands_per_batch`` equal parts, part k drawn from the k-th
+of as many log-spaced bands of the budget's width range (one camera call per part, its width drawn
+log-uniform in its band). Batches of one band each (``bands_per_batch=1``, the pre-training's recipe)
+made a fine-tune on a blurring lens swing: most bands are unreadable there (on gp everything under
+64 px), so most steps pulled the reader toward guessing and away from the wide plates it could read.
+On the quick gp lens (seed 0, lr 1e-3) the held-out mean went 0.17, 0.14, 0.17, ... 0.19 at step 600,
+then 0.07-0.14 (192 px plates 0.84 -> 0.06 -> 0.34), also at lr 3e-4 (0.20 at 600, then 0.07-0.14), and
+recomputing BatchNorm's statistics over every band did not steady it; with four bands per batch it
+rose steadily, 0.22 at step 100 to 0.26 at 900 (96 px 0.59, 128 px 0.97, 192 px 1.0).
+
+Every ``eval_every`` steps the reader is scored on a fixed held-out set (plates of each width bin
+of ``EVAL_WIDTHS_PX`` that fits the range, the true box, no jitter); training stops
 when the mean exact-plate accuracy over the bins has not risen by ``min_gain`` over the last
 ``patience`` evaluations (it has flattened), never before ``min_steps``, or at the budget's last step.
 The floor is there because the mean is diluted and noisy where a blurring lens leaves most bins at 0:
@@ -35,7 +44,8 @@ from tqdm.auto import tqdm
 from attacks.networks.plate_cnn import PlateCNN
 from attacks.plates.plate_sim import PlateBatch, simulate_plates
 
-__all__ = ["EVAL_WIDTHS_PX", "FitCurve", "ReaderBudget", "held_out_set", "plate_accuracy", "train_reader"]
+__all__ = ["EVAL_WIDTHS_PX", "FitCurve", "ReaderBudget", "held_out_set", "plate_accuracy", "train_reader",
+           "training_batch", "width_bands"]
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +69,7 @@ class ReaderBudget:
         patience: Evaluations without a gain of ``min_gain`` before the fit stops.
         min_gain: The gain in mean held-out accuracy (a fraction) that counts as still improving.
         min_steps: Steps before which the fit never stops as flattened.
+        bands_per_batch: Log-spaced width bands every batch draws an equal part from (module docstring).
     """
 
     max_steps: int
@@ -70,12 +81,21 @@ class ReaderBudget:
     patience: int
     min_gain: float = 0.01
     min_steps: int = 0
+    bands_per_batch: int = 1
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.bands_per_batch <= self.batch_size:
+            raise ValueError(f"ReaderBudget.bands_per_batch={self.bands_per_batch}: must be 1 to batch_size "
+                             f"({self.batch_size}), each band gets at least one plate")
 
     def to_dict(self) -> dict[str, Any]:
-        """The fields (``min_steps`` only when set: the keys of fits made before it stay valid)."""
+        """The fields (``min_steps`` and ``bands_per_batch`` only when not their defaults: the keys of fits
+        made before them stay valid)."""
         d = dataclasses.asdict(self)
         if not d["min_steps"]:
             del d["min_steps"]
+        if d["bands_per_batch"] == 1:
+            del d["bands_per_batch"]
         return d
 
 
@@ -160,9 +180,9 @@ def _train(net: PlateCNN, cameras: list[Camera | None], budget: ReaderBudget, sp
     net.train()
     bar = tqdm(range(budget.max_steps), desc="plate reader fit", unit="step", leave=False)
     for step in bar:
-        batch = simulate_plates(cameras[step % len(cameras)], budget.batch_size, budget.widths_px, rng, generator,
-                                spread_px, fmt, psf_half_px)
-        loss = _loss(net(batch.crops), batch.labels, criterion)
+        crops, labels = training_batch(cameras[step % len(cameras)], budget, rng, generator, spread_px, fmt,
+                                       psf_half_px)
+        loss = _loss(net(crops), labels, criterion)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
@@ -186,6 +206,26 @@ def _train(net: PlateCNN, cameras: list[Camera | None], budget: ReaderBudget, sp
         net.load_state_dict(best)
     net.eval()
     return curve
+
+
+def width_bands(budget: ReaderBudget) -> list[tuple[float, float]]:
+    """The ``bands_per_batch`` log-spaced (low, high) bands of the budget's width range."""
+    low, high = budget.widths_px
+    edges = np.exp(np.linspace(math.log(low), math.log(high), budget.bands_per_batch + 1))
+    return [(float(a), float(b)) for a, b in zip(edges[:-1], edges[1:])]
+
+
+def training_batch(camera: Camera | None, budget: ReaderBudget, rng: np.random.Generator, generator: torch.Generator,
+                   spread_px: float, fmt: str, psf_half_px: int) -> tuple[Tensor, Tensor]:
+    """One training batch (crops, labels): ``batch_size`` plates split as evenly as it goes over the
+    budget's ``width_bands``, one camera call per band, in band order."""
+    bands = width_bands(budget)
+    sizes = [len(part) for part in np.array_split(np.arange(budget.batch_size), len(bands))]
+    parts = [simulate_plates(camera, n, band, rng, generator, spread_px, fmt, psf_half_px)
+             for n, band in zip(sizes, bands)]
+    if len(parts) == 1:
+        return parts[0].crops, parts[0].labels
+    return torch.cat([p.crops for p in parts]), torch.cat([p.labels for p in parts])
 
 
 def _gain(accuracy: list[float], patience: int) -> float:

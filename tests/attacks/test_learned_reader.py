@@ -12,7 +12,9 @@ import torch
 import attacks
 import lenses
 from attacks.learned_reader import LearnedReader, pretrained_key
-from attacks.plate_reader_training import FitCurve, ReaderBudget, _flattened, _gain, plate_accuracy, train_reader
+import attacks.plate_reader_training as reader_training
+from attacks.plate_reader_training import (FitCurve, ReaderBudget, _flattened, _gain, plate_accuracy, train_reader,
+                                         training_batch, width_bands)
 from attacks.plates.plate_render import PLATE_FORMAT
 from attacks.plates.plate_sim import CROP_HW, crop_margin_px, plate_crops, psf_radius_px, simulate_plates
 from attacks.shipped_weights import find_shipped
@@ -67,6 +69,38 @@ def test_simulation_is_a_function_of_its_seeds_and_labels_spell_the_text():
     for text, label in zip(a.texts, a.labels.tolist()):
         assert "".join((letters if f == "L" else digits)[i] for f, i in zip(PLATE_FORMAT, label)) == text
     assert all(28 <= w <= 63 for w in a.widths_px)
+
+
+def test_a_training_batch_draws_an_equal_part_from_each_log_spaced_band(monkeypatch):
+    budget = ReaderBudget(max_steps=1, batch_size=10, lr=1e-3, widths_px=(8.0, 200.0), eval_every=1, eval_plates=1,
+                          patience=1, bands_per_batch=4)
+    bands = width_bands(budget)
+    assert bands[0][0] == pytest.approx(8.0) and bands[-1][1] == pytest.approx(200.0)
+    assert all(a[1] == pytest.approx(b[0]) for a, b in zip(bands, bands[1:]))           # contiguous
+    assert {round(math.log(hi / lo), 9) for lo, hi in bands} == {round(math.log(25) / 4, 9)}  # equal log ratios
+    calls = []
+
+    def spy(camera, n, widths_px, *args, **kwargs):
+        batch = simulate_plates(camera, n, widths_px, *args, **kwargs)
+        calls.append((n, widths_px, batch.widths_px))
+        return batch
+    monkeypatch.setattr(reader_training, "simulate_plates", spy)
+    crops, labels = training_batch(None, budget, np.random.default_rng(0), torch.Generator().manual_seed(0), 0.0,
+                                   PLATE_FORMAT, 0)
+    assert [n for n, _, _ in calls] == [3, 3, 2, 2] and crops.shape[0] == labels.shape[0] == 10
+    assert [band for _, band, _ in calls] == bands
+    for _, (lo, hi), widths in calls:                    # each plate within its band (+-5 % per plate, rounded)
+        assert all(0.95 * lo - 1 <= w <= 1.05 * hi + 1 for w in widths)
+    again = training_batch(None, budget, np.random.default_rng(0), torch.Generator().manual_seed(0), 0.0, PLATE_FORMAT, 0)
+    assert torch.equal(again[0], crops) and torch.equal(again[1], labels)
+
+
+def test_bands_per_batch_is_checked_and_left_out_of_keys_made_before_it():
+    one = dict(max_steps=1, batch_size=4, lr=1e-3, widths_px=(8.0, 200.0), eval_every=1, eval_plates=1, patience=1)
+    assert "bands_per_batch" not in ReaderBudget(**one).to_dict()
+    assert ReaderBudget(**one, bands_per_batch=4).to_dict()["bands_per_batch"] == 4
+    with pytest.raises(ValueError, match="bands_per_batch=5"):
+        ReaderBudget(**one, bands_per_batch=5)
 
 
 def test_the_stop_rule_flattens_and_flags_a_rising_fit():
