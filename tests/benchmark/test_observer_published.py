@@ -239,3 +239,47 @@ def test_a_run_check_says_in_one_line_what_it_checked_and_why_not_the_rest(tmp_p
     assert check["not_checked"]["defocus"].endswith("optics.focus_distance_m")
     nothing = published.run_violations(records, {"defocus": {"spec": moved}}, STUDY)["summary"]
     assert nothing.startswith("nothing checked; defocus not checked")
+
+
+def test_the_chart_draws_an_entrys_ensemble_per_width_bin_against_the_ceiling():
+    """An entry whose plates carry widths draws its ensemble (a plate read by any chain) per width bin at the
+    bins' centres, with Wilson intervals; a bin of fewer than MIN_BIN_PLATES plates is left out; an entry
+    without widths keeps its readers' pooled points."""
+    import math
+
+    from benchmark.results import stats
+    from benchmark.results.charts.ideal_observer import MIN_BIN_PLATES, ideal_observer_figure
+    from benchmark.results.entries import make_entry
+    from benchmark.results.schema import Units
+    widths = [40] * 20 + [100] * 20 + [20] * (MIN_BIN_PLATES - 1)  # bins 32-48, 96-128 and a thin 16-24
+    a = [1] * 5 + [0] * 15 + [1] * 10 + [0] * 10 + [1] * (MIN_BIN_PLATES - 1)
+    b = [0] * 5 + [1] * 5 + [0] * 10 + [0] * 20 + [0] * (MIN_BIN_PLATES - 1)
+
+    def panel_of(with_widths: bool):
+        rows = []
+        for attack, correct in (("lpdr-oracle", a), ("identity>lpdr-oracle", b)):
+            names = [f"synthetic/val/0/{i:05d}@x0y0p0#0" for i in range(len(correct))]
+            restorer, reader = attack.split(">") if ">" in attack else (None, attack)
+            row = Row(kind="chain" if restorer else "reader", lens="defocus", attack=attack, restorer=restorer,
+                      reader=reader, seed=0, profile="quick", scenes="synthetic", threat_model="sensor-access",
+                      metrics={"plate_acc": sum(correct) / len(correct), "n_plates": float(len(correct))})
+            values = {"correct": correct, "char_errors": [7 * (1 - c) for c in correct]}
+            row.set_units(Units.from_names("plate", names, {**values, "width_px": widths} if with_widths else values))
+            rows.append(row)
+        entry = make_entry("defocus", rows, {}, None, DEFOCUS_SPEC)
+        return next(ax for ax in ideal_observer_figure(STUDY, [entry]).get_axes() if ax.get_title() == "defocus")
+
+    panel = panel_of(with_widths=True)
+    (curve,) = [c for c in panel.containers if c.lines[0].get_marker() == "D"]
+    xs, ys = (list(map(float, v)) for v in curve.lines[0].get_data())
+    assert xs == pytest.approx([math.sqrt(32 * 48), math.sqrt(96 * 128)])
+    assert ys == pytest.approx([50.0, 50.0])  # 10 of 20 read by either chain in each bin
+    low, high = stats.wilson_interval(10, 20)
+    (bars,) = curve.lines[2]
+    spans = [float(v) for seg in bars.get_segments() for v in seg[:, 1]]
+    assert spans == pytest.approx([100 * low, 100 * high] * 2)
+    assert "ensemble of 2 chains" in " ".join(t.get_text() for t in panel.get_legend().get_texts())
+    # The same entry without widths: each reader's pooled point, no ensemble curve.
+    panel = panel_of(with_widths=False)
+    assert not [c for c in panel.containers if c.lines[0].get_marker() == "D"]
+    assert len([c for c in panel.containers if c.lines[0].get_marker() == "o"]) == 2

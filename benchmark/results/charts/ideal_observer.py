@@ -2,16 +2,19 @@
 
 Top: the plate ceiling (left) and the mean per-character ceiling (right) of every lens of the
 study, T = 1 solid, T = 30 dashed, the PSF at each width's own distance dotted, the 5 % line.
-Bottom: one panel per lens, its T = 1 plate ceiling with the 95 % band and T = 30 dashed, and every
-reader and chain of the entries whose lens spec the study matches: the accuracy over all readable
-plates with its Wilson 95 % interval (entries keep no per-width accuracy), spread over the shaded
-widths it pools (readable plates, 32 px and up); and, as squares at each width bin's centre, the
+Bottom: one panel per lens, its T = 1 plate ceiling with the 95 % band and T = 30 dashed, and the
+entries whose lens spec the study matches. An entry whose plates carry their widths draws its
+ensemble's accuracy per width bin (a plate read by any chain, benchmark.results.ensemble; Wilson 95 %
+intervals, bins of fewer than MIN_BIN_PLATES plates left out) as a line against the ceiling: the
+attack gap at a glance. An older entry (no widths) draws every reader and chain's accuracy over all
+readable plates, spread over the shaded widths it pools. As squares at each width bin's centre, the
 reader study (leaderboard/studies/ideal_observer_readers.json: `ideal-observer` beside `lpdr-oracle`
 on the same plates, per width bin with Wilson 95 % intervals) where its lens spec matches.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -24,6 +27,7 @@ from matplotlib.lines import Line2D
 
 from benchmark.results.charts import new_figure, save_figure
 from benchmark.results.charts.labels import wrap_label
+from benchmark.results.ensemble import WidthBin, plate_ensemble
 from benchmark.results.entries import Entry
 
 
@@ -53,6 +57,9 @@ _HEADER_IN, _TITLE_IN, _XLABEL_IN, _LEGEND_LINE_IN = 0.45, 0.35, 0.5, LEGEND_PT 
 # Per lens panel at most this many readers and chains are drawn in colour (the most accurate first); the
 # others are grey points under one legend entry, so that a legend stays a few lines long.
 MAX_READERS = 6
+# An ensemble's width bin is drawn from this many plates (pooled over seeds): a smoke entry's one plate
+# per bin and seed would draw intervals spanning most of the axis.
+MIN_BIN_PLATES = 10
 # Twelve distinct colours, no grey (grey is the "other readers" points' and the ceiling band's).
 PALETTE = tuple([matplotlib.colormaps["tab10"](i) for i in range(10) if i != 7] + ["#393b79", "#8c6d31", "#637939"])
 
@@ -64,6 +71,28 @@ def _panel_points(points: list, max_readers: int = MAX_READERS) -> tuple[list, l
     return (ranked, []) if len(ranked) <= max_readers else (ranked[:max_readers - 1], ranked[max_readers - 1:])
 
 
+@dataclasses.dataclass(frozen=True)
+class EnsembleCurve:
+    """One entry's ensemble accuracy per width bin (those of at least MIN_BIN_PLATES plates)."""
+
+    profile: str
+    chains: int
+    n_plates: int
+    bins: tuple[WidthBin, ...]
+
+    def label(self) -> str:
+        return wrap_label(f"ensemble of {self.chains} chains per width bin ({self.profile}, n={self.n_plates})")
+
+
+def ensemble_curve(entry: Entry) -> EnsembleCurve | None:
+    """The entry's ensemble per width bin, or None where its plates carry no widths (older entries)."""
+    ensemble = plate_ensemble(entry.rows)
+    if ensemble is None or ensemble.bins is None:
+        return None
+    bins = tuple(b for b in ensemble.bins if b.accuracy.n >= MIN_BIN_PLATES)
+    return EnsembleCurve(entry.profile, len(ensemble.chains), sum(b.accuracy.n for b in ensemble.bins), bins)
+
+
 def ideal_observer_figure(study: dict, entries: Sequence[Entry] = (), readers: dict | None = None) -> Figure:
     """The chart of the module docstring; `study` is leaderboard/studies/ideal_observer.json, `readers`
     the reader study (ideal_observer_readers.json) or None. Lens panels are laid out _PANEL_COLS to a row,
@@ -73,15 +102,18 @@ def ideal_observer_figure(study: dict, entries: Sequence[Entry] = (), readers: d
     panels_data = []
     for name in names:
         record = study["lenses"][name]
-        points = [(e.profile, m) for e in entries if study_record(study, name, e.lens_spec) is not None
-                  and e.lens == name for m in entry_accuracies(e)]
+        matching = [e for e in entries if e.lens == name and study_record(study, name, e.lens_spec) is not None]
+        by_entry = [(e, ensemble_curve(e)) for e in matching]
+        curves = [c for _, c in by_entry if c is not None and c.bins]
+        points = [(e.profile, m) for e, c in by_entry if c is None for m in entry_accuracies(e)]
         study_points = _reader_study_points(readers, name, record.get("lens_spec"))
         shown, grouped = _panel_points(points)
-        labels = [wrap_label(f"{m.reader} ({profile}, n={m.n_plates})") for profile, m in shown]
+        labels = [c.label() for c in curves]
+        labels += [wrap_label(f"{m.reader} ({profile}, n={m.n_plates})") for profile, m in shown]
         labels += [wrap_label(f"{r} per width bin (reader study)") for r in dict.fromkeys(r for r, _ in study_points)]
         n_entries = 2 + bool(grouped) + len(labels)
         lines = n_entries + sum(label.count("\n") for label in labels)
-        panels_data.append((name, record, points, shown, grouped, study_points, 1.3 * lines + 0.55 * n_entries))
+        panels_data.append((name, record, curves, shown, grouped, study_points, 1.3 * lines + 0.55 * n_entries))
     rows = [panels_data[i:i + _PANEL_COLS] for i in range(0, len(panels_data), _PANEL_COLS)]
     row_heights = [_TITLE_IN + _PANEL_H_IN + _XLABEL_IN + max(p[-1] for p in row) * _LEGEND_LINE_IN + 0.2
                    for row in rows]
@@ -123,18 +155,19 @@ def ideal_observer_figure(study: dict, entries: Sequence[Entry] = (), readers: d
              fontsize=FONT_PT + 2, ha="left", va="top")
     # Bottom: one panel per lens, the readers' accuracy against its T = 1 ceiling.
     fig.text(_LEFT_IN / FIG_W_IN, 1 - (top_block + 0.1) / height,
-             "Per lens: the ceiling (T = 1, grey 95 % band) against the readers' accuracy over all readable plates "
-             "(Wilson 95 %)", fontsize=FONT_PT + 1, ha="left", va="top")
+             "Per lens: the ceiling (T = 1, grey 95 % band) against what the attackers read (Wilson 95 %)",
+             fontsize=FONT_PT + 1, ha="left", va="top")
     panel_w = (FIG_W_IN - _LEFT_IN - _RIGHT_IN - 0.3 * (_PANEL_COLS - 1)) / _PANEL_COLS
     row_top = height - top_block - _HEADER_IN
     first = None
     for row, row_h in zip(rows, row_heights):
-        for col, (name, record, points, shown, grouped, study_points, _) in enumerate(row):
+        for col, (name, record, curves, shown, grouped, study_points, _) in enumerate(row):
             ax = axes_at(_LEFT_IN + col * (panel_w + 0.3), row_top - _TITLE_IN - _PANEL_H_IN, panel_w, _PANEL_H_IN,
                          **({"sharey": first} if first is not None else {}))
             first = first or ax
-            _lens_panel(ax, record, points, shown, grouped, study_points)
-            ax.set_title(name if points or study_points else f"{name} (no matching entry)", fontsize=FONT_PT)
+            _lens_panel(ax, record, curves, shown, grouped, study_points)
+            matched = curves or shown or grouped or study_points
+            ax.set_title(name if matched else f"{name} (no matching entry)", fontsize=FONT_PT)
             if col == 0:
                 ax.set_ylabel("plate read exactly (%)", fontsize=FONT_PT)
             else:
@@ -144,20 +177,22 @@ def ideal_observer_figure(study: dict, entries: Sequence[Entry] = (), readers: d
 
 
 def _width_axis(ax) -> None:
-    """Log plate-width axis 3.5-190 px, ticks 4-128 px."""
+    """Log plate-width axis 3.5-260 px (an open last width bin is drawn at 1.25 x its start), ticks 4-192 px."""
     ax.set_xscale("log")
-    ax.set_xticks([4, 8, 16, 32, 64, 128])
-    ax.set_xticklabels(["4", "8", "16", "32", "64", "128"])
+    ax.set_xticks([4, 8, 16, 32, 64, 128, 192])
+    ax.set_xticklabels(["4", "8", "16", "32", "64", "128", "192"])
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-    ax.set_xlim(3.5, 190)
+    ax.set_xlim(3.5, 260)
     ax.set_xlabel("plate width (px)", fontsize=FONT_PT - 1)
     ax.tick_params(labelsize=FONT_PT - 1)
     ax.grid(True, alpha=0.3)
 
 
-def _lens_panel(ax, record: dict, points: list, shown: list, grouped: list, study_points: list) -> None:
-    """One lens: its T = 1 ceiling with the 95 % band, T = 30 dashed, the entries' readers (``shown`` in
-    colour, ``grouped`` grey) spread over the readable widths, the reader study's squares per width bin."""
+def _lens_panel(ax, record: dict, curves: list[EnsembleCurve], shown: list, grouped: list, study_points: list
+                ) -> None:
+    """One lens: its T = 1 ceiling with the 95 % band, T = 30 dashed, the entries' ensembles per width bin
+    (``curves``), older entries' readers (``shown`` in colour, ``grouped`` grey) spread over the readable
+    widths, the reader study's squares per width bin."""
     curve = record["t1"]["curve"]
     widths = np.asarray(curve["widths_px"], dtype=float)
     band = np.asarray(curve["plate_interval"], dtype=float)
@@ -167,19 +202,26 @@ def _lens_panel(ax, record: dict, points: list, shown: list, grouped: list, stud
         t30 = record["t30"]["curve"]
         ax.plot(t30["widths_px"], 100 * np.asarray(t30["plate_ceiling"], dtype=float), "k--", lw=0.8,
                 label="ceiling T=30")
-    lo, hi = 32.0, 160.0  # readable plates (>= 32 px) up to the study's widest width
-    ax.axvspan(lo, hi, color="tab:blue", alpha=0.05, lw=0)
-    xs = np.geomspace(lo * 1.1, hi / 1.1, max(len(points), 1))
+    for k, c in enumerate(curves):
+        xs = [_bin_centre_px(b.low_px, None if np.isinf(b.high_px) else b.high_px) for b in c.bins]
+        acc = np.array([100 * b.accuracy.value for b in c.bins])
+        low, high = (np.array([100 * b.accuracy.interval[i] for b in c.bins]) for i in (0, 1))
+        ax.errorbar(xs, acc, yerr=[acc - low, high - acc], fmt="D-", ms=3.5, lw=1.3, capsize=2,
+                    color=PALETTE[k % len(PALETTE)], label=c.label())
     order = shown + grouped
+    lo, hi = 32.0, 160.0  # an older entry's readable plates (>= 32 px) up to the study's widest width
+    if order:
+        ax.axvspan(lo, hi, color="tab:blue", alpha=0.05, lw=0)
+    xs = np.geomspace(lo * 1.1, hi / 1.1, max(len(order), 1))
     for k, ((profile, m), x) in enumerate(zip(order, xs)):
-        colour = PALETTE[k % len(PALETTE)] if k < len(shown) else "0.55"
+        colour = PALETTE[(len(curves) + k) % len(PALETTE)] if k < len(shown) else "0.55"
         ax.errorbar([x], [100 * m.accuracy], yerr=[[100 * (m.accuracy - m.interval[0])],
                                                      [100 * (m.interval[1] - m.accuracy)]],
                     fmt="o", ms=3.5 if k < len(shown) else 2.5, color=colour, capsize=2, lw=1 if k < len(shown) else 0.7,
                     label=wrap_label(f"{m.reader} ({profile}, n={m.n_plates})") if k < len(shown) else None)
     if grouped:
         ax.plot([], [], "o", ms=2.5, color="0.55", label=wrap_label(f"{len(grouped)} other readers and chains (grey)"))
-    marks = {r: ("s", PALETTE[(len(shown) + k) % len(PALETTE)])
+    marks = {r: ("s", PALETTE[(len(curves) + len(shown) + k) % len(PALETTE)])
              for k, r in enumerate(dict.fromkeys(r for r, _ in study_points))}
     for reader, b in study_points:
         x = _bin_centre_px(b["low_px"], b["high_px"]) * (0.97 if reader == "lpdr-oracle" else 1.03)
