@@ -220,11 +220,9 @@ def training_batch(camera: Camera | None, budget: ReaderBudget, rng: np.random.G
     """One training batch (crops, labels): ``batch_size`` plates split as evenly as it goes over the
     budget's ``width_bands``, one camera call per band, in band order."""
     bands = width_bands(budget)
-    sizes = [len(part) for part in np.array_split(np.arange(budget.batch_size), len(bands))]
-    parts = [simulate_plates(camera, n, band, rng, generator, spread_px, fmt, psf_half_px)
-             for n, band in zip(sizes, bands)]
-    if len(parts) == 1:
-        return parts[0].crops, parts[0].labels
+    each, extra = divmod(budget.batch_size, len(bands))
+    parts = [simulate_plates(camera, each + (k < extra), band, rng, generator, spread_px, fmt, psf_half_px)
+             for k, band in enumerate(bands)]
     return torch.cat([p.crops for p in parts]), torch.cat([p.labels for p in parts])
 
 
