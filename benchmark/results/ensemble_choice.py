@@ -15,12 +15,12 @@ The rule (``keeps``): a chain stays in the standard ensemble when its removal ch
 ensemble plate accuracy by more than ``PLATE_POINTS`` points or its ensemble PSNR by more than
 ``PSNR_DB`` dB. The issue adds ``lpdr`` (the paper's detector pipeline) on the sensor image and after
 the strongest restorer (the one that is the best restorer on the most scenes of the entries), and the
-learned reader once it is published. ``PROPOSED_ENSEMBLE`` is what that selects on the published quick
+learned reader, which the rule keeps once entries hold it. ``PROPOSED_ENSEMBLE`` is what that selects on the published quick
 entries (docs/ensemble.md, written by ``python -m benchmark.studies.ensemble_choice``;
 tests/benchmark/test_ensemble_choice.py recomputes it, so it cannot drift from the entries).
 
-``STANDARD_ENSEMBLE`` is the run's default (benchmark.runner.runner.standard_selection): the proposal, the
-learned reader on the sensor image, and the ``raw`` reference (the uncorrected image's PSNR, no chain).
+``STANDARD_ENSEMBLE`` is the run's default (benchmark.runner.runner.standard_selection): the proposal (with
+the learned reader on the sensor image) and the ``raw`` reference (the uncorrected image's PSNR, no chain).
 """
 
 from __future__ import annotations
@@ -47,13 +47,15 @@ DOCS = "docs/ensemble.md"
 # What the rule selects on the published quick entries (see the module docstring and DOCS); the test
 # recomputes it from leaderboard/entries/*quick*.json.
 PROPOSED_ENSEMBLE: tuple[str, ...] = (
-    "demosaic-vng", "demosaic-vng>lpdr-oracle", "lpdr", "lpdr-oracle", "nafnet-known-pairs",
+    "demosaic-vng", "demosaic-vng>lpdr-oracle", "learned-reader", "lpdr", "lpdr-oracle", "nafnet-known-pairs",
     "nafnet-known-pairs>lpdr-oracle", "richardson-lucy-known-psf", "richardson-lucy-known-psf>lpdr",
     "training-adversary", "training-adversary>lpdr-oracle", "wiener-known-psf", "wiener-known-psf>lpdr-oracle")
 
-# The run's default chains: the proposal, plus the learned reader (the strongest reader, which the
-# entries the proposal was chosen on did not hold) and the uncorrected image as a reference restorer.
-STANDARD_ENSEMBLE: tuple[str, ...] = PROPOSED_ENSEMBLE + ("learned-reader", "raw")
+LEARNED_READER = "learned-reader"
+# The run's default chains: the proposal and the uncorrected image as a reference restorer. The learned
+# reader is always in it (the rule keeps it wherever entries hold it) and stays last of the readers, the
+# order the published entries' runs evaluated their chains in.
+STANDARD_ENSEMBLE: tuple[str, ...] = tuple(c for c in PROPOSED_ENSEMBLE if c != LEARNED_READER) + (LEARNED_READER, "raw")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -126,8 +126,8 @@ def render(directory: Path = LEADERBOARD, date: str | None = None) -> str:
         f"Keep every chain whose removal changes some lens's ensemble plate accuracy by more than {PLATE_POINTS:g} "
         f"point or its ensemble PSNR by more than {PSNR_DB:g} dB. Add `lpdr` (the paper's detector pipeline) on "
         f"the sensor image and after the strongest restorer (the best restorer on the most scenes of these "
-        f"entries: `{strongest}`), and the learned reader of the privacy-range issue once it is published "
-        "(it is not in these entries).", "",
+        f"entries: `{strongest}`), and `learned-reader` (the learned reader of the privacy-range issue), which "
+        + ("the rule keeps on its own here." if "learned-reader" in kept else "these entries do not hold.") , "",
         "## The proposed standard ensemble", "",
         f"{len(proposed)} chains: " + ", ".join(f"`{a}`" for a in proposed) + ".", "",
         f"The rule alone keeps {len(kept)}: " + ", ".join(f"`{a}`" for a in sorted(kept)) + ".", "",
@@ -135,11 +135,12 @@ def render(directory: Path = LEADERBOARD, date: str | None = None) -> str:
         + ".", "",
         f"Left out of the proposal ({len(dropped)}): " + (", ".join(f"`{a}`" for a in dropped) or "none") + ".", "",
         "This is `benchmark.results.ensemble_choice.PROPOSED_ENSEMBLE`. The run's default, "
-        "`STANDARD_ENSEMBLE`, is it plus `learned-reader` on the sensor image and the `raw` reference (the "
+        "`STANDARD_ENSEMBLE`, is it with `learned-reader` on the sensor image and the `raw` reference (the "
         "uncorrected image's PSNR, read by no chain): `python -m benchmark run` measures those chains only, "
         "`--attack NAME` exactly the attackers named (every reader after every restorer), `--all-chains` the full "
         "cross product of the attackers that run by default. Entries published before the standard ensemble "
-        "hold the full cross product until `python -m benchmark publish` replaces them.",
+        "hold the full cross product until `python -m benchmark publish` replaces them; those re-published with "
+        "it hold only its chains, so a chain left out of it can no longer show that it decides there.",
         drift,
         "## Every chain", "",
         "Summed over the entries it ran on; the largest removal effect over them, with its lens.", "",
