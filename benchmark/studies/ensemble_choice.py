@@ -17,7 +17,7 @@ import hashlib
 from collections.abc import Sequence
 from pathlib import Path
 
-from benchmark.results.ensemble_choice import (PLATE_POINTS, PROPOSED_ENSEMBLE, PSNR_DB, ChainEffect,
+from benchmark.results.ensemble_choice import (LEARNED_READER, PLATE_POINTS, PROPOSED_ENSEMBLE, PSNR_DB, ChainEffect,
                                                ensemble_values, keeps, proposed_ensemble, removal_effects,
                                                strongest_restorer)
 from benchmark.results.entries import LEADERBOARD, Entry, display_order, read_entry
@@ -127,7 +127,7 @@ def render(directory: Path = LEADERBOARD, date: str | None = None) -> str:
         f"point or its ensemble PSNR by more than {PSNR_DB:g} dB. Add `lpdr` (the paper's detector pipeline) on "
         f"the sensor image and after the strongest restorer (the best restorer on the most scenes of these "
         f"entries: `{strongest}`), and `learned-reader` (the learned reader of the privacy-range issue), which "
-        + ("the rule keeps on its own here." if "learned-reader" in kept else "these entries do not hold.") , "",
+        + ("the rule keeps on its own here." if LEARNED_READER in kept else "these entries do not hold."), "",
         "## The proposed standard ensemble", "",
         f"{len(proposed)} chains: " + ", ".join(f"`{a}`" for a in proposed) + ".", "",
         f"The rule alone keeps {len(kept)}: " + ", ".join(f"`{a}`" for a in sorted(kept)) + ".", "",

@@ -35,8 +35,9 @@ READER_STUDY = Path("studies") / "ideal_observer_readers.json"
 
 
 def _bin_centre_px(low_px: float, high_px: float | None) -> float:
-    """Where a width bin's point is drawn: its geometric centre; an open last bin at 1.25 x its start."""
-    return float(np.sqrt(low_px * high_px)) if high_px is not None else 1.25 * low_px
+    """Where a width bin's point is drawn: its geometric centre; an open last bin (high None or inf) at
+    1.25 x its start."""
+    return float(np.sqrt(low_px * high_px)) if high_px is not None and np.isfinite(high_px) else 1.25 * low_px
 
 
 def _reader_study_points(readers: dict | None, name: str, spec: dict | None) -> list[tuple[str, dict]]:
@@ -203,7 +204,7 @@ def _lens_panel(ax, record: dict, curves: list[EnsembleCurve], shown: list, grou
         ax.plot(t30["widths_px"], 100 * np.asarray(t30["plate_ceiling"], dtype=float), "k--", lw=0.8,
                 label="ceiling T=30")
     for k, c in enumerate(curves):
-        xs = [_bin_centre_px(b.low_px, None if np.isinf(b.high_px) else b.high_px) for b in c.bins]
+        xs = [_bin_centre_px(b.low_px, b.high_px) for b in c.bins]
         acc = np.array([100 * b.accuracy.value for b in c.bins])
         low, high = (np.array([100 * b.accuracy.interval[i] for b in c.bins]) for i in (0, 1))
         ax.errorbar(xs, acc, yerr=[acc - low, high - acc], fmt="D-", ms=3.5, lw=1.3, capsize=2,
