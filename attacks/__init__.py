@@ -11,17 +11,11 @@ out of an image (``Reader.read``). Attackers register in the entry-point group
 
 Importing this package imports no attacker; ``attacks.available()`` lists them.
 
-Importing it also turns ONNX Runtime's telemetry off (``ORT_DISABLE_TELEMETRY=1`` unless the
-environment already names a value): since 1.29 the official Linux wheels upload usage events to
-``mobile.events.data.microsoft.com`` from their own threads (6 DNS lookups in a 45 s session, and a
-device id and an event store under ``~/.cache/Microsoft``), which ``disable_telemetry_events()``
-does not stop; the variable does, when it is set before ONNX Runtime creates its environment.
-Every attacker, and the utility net's ONNX path, imports this package first.
+Importing it also sets the offline switches of ONNX Runtime and Hugging Face (``common.offline``)
+before any attacker imports them.
 """
 
-import os as _os
-
-_os.environ.setdefault("ORT_DISABLE_TELEMETRY", "1")
+import common.offline  # noqa: F401
 
 from attacks.base import (
     Attack,

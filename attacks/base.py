@@ -1,6 +1,6 @@
 """The attacker API: threat models, the fit context, and the Restorer / Reader base classes.
 
-An attacker is one class in one file (see ``attacks/identity.py`` for the smallest one). It
+An attacker is one class in one file (see ``attacks/restorers/identity.py`` for the smallest one). It
 declares what the adversary is assumed to have (``threat_model``) and which ``FitContext``
 fields it needs (``requires``); ``fit`` refuses to start when one of them is missing, so a
 mismatch between an attacker and a benchmark configuration fails before any work is done.

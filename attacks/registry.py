@@ -3,7 +3,7 @@
 Built-in and third-party plugins register the same way: an entry point in a group such as
 ``privacy_lens_bench.attacks`` or ``privacy_lens_bench.lenses`` (ours are declared in this
 project's ``pyproject.toml``). Discovery itself (``discover``, ``suggest``) is shared with the
-lens registry and lives in ``lenses.registry``; this module is the attacker registry built on it
+lens registry and lives in ``common.plugins``; this module is the attacker registry built on it
 (``attacks.load``, ``attacks.available``, ``attacks.load_all``) and ``import_from_file``.
 """
 
@@ -18,7 +18,7 @@ from importlib.metadata import EntryPoint
 from pathlib import Path
 
 from attacks.base import Attack, Reader, Restorer, ThreatModel
-from lenses.registry import DuplicateNameError, discover, similar, source_of, suggest
+from common.plugins import DuplicateNameError, discover, similar, source_of, suggest
 
 __all__ = [
     "ATTACKS_GROUP",

@@ -40,7 +40,7 @@ from benchmark.store.profiles import Profile, get_profile
 from benchmark.store.provenance import git_commit
 from benchmark.runner.config import RunConfig, training_scenes
 from benchmark.scenes import PLATE_FORMAT, SCENE_SETS, load_scenes, plate_entropy_bits
-from benchmark.results.ensemble_choice import STANDARD_ENSEMBLE
+from benchmark.runner.defaults import STANDARD_ENSEMBLE
 from benchmark.results.schema import Row, read_results, write_results
 from benchmark.results.schema import Results as ResultsFile
 from benchmark.runner.pictures import copy_picture

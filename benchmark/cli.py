@@ -8,7 +8,6 @@ import contextlib
 import datetime as _dt
 import errno
 import logging
-import os
 import json
 import sys
 import time
@@ -16,10 +15,8 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-# Nothing downloads, nothing phones home at run time: guard the libraries that might try
-# (ONNX Runtime's telemetry: see attacks/__init__.py).
-for _var in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE", "HF_DATASETS_OFFLINE", "ORT_DISABLE_TELEMETRY"):
-    os.environ.setdefault(_var, "1")
+# Nothing downloads, nothing phones home at run time (common/offline.py says which switches and why).
+import common.offline  # noqa: E402,F401
 
 # Everything below imports torch (through lenses, attacks or the stages) only when a command needs it,
 # so that `--help` answers at once: tests/benchmark/test_cli_help.py checks that building the parser
@@ -266,7 +263,7 @@ CODESIGN_CHOICES = _LazyChoices(_codesign_lenses)
 def _attack_help() -> str:
     """`run --attack`'s help: the standard ensemble's chains, what --all-chains adds (the attackers
     that run by default, read from their classes), and what runs only when named."""
-    from benchmark.results.ensemble_choice import STANDARD_ENSEMBLE
+    from benchmark.runner.defaults import STANDARD_ENSEMBLE
     rows = attacker_catalogue()
     default = [r["name"] for r in rows if r["runs_by_default"]]
     named = [r["name"] for r in rows if not r["runs_by_default"] and not r["standard_chains"]]
@@ -290,8 +287,8 @@ def attacker_catalogue() -> list[dict[str, Any]]:
     default, a one-line description and where it comes from; one that fails to import says why."""
     import attacks
     from attacks.registry import ATTACKS_GROUP
-    from benchmark.results.ensemble_choice import STANDARD_ENSEMBLE
-    from lenses.registry import discover
+    from benchmark.runner.defaults import STANDARD_ENSEMBLE
+    from common.plugins import discover
     rows = []
     for name, entry in sorted(discover(ATTACKS_GROUP).items()):
         row: dict[str, Any] = {"name": name, "source": entry.value,
@@ -313,7 +310,7 @@ def lens_catalogue() -> list[dict[str, Any]]:
     fixed, a one-line description and where it comes from. Lenses run only when named (--lens)."""
     import lenses
     from benchmark.codesign.schemes import SCHEMES
-    from lenses.registry import discover
+    from common.plugins import discover
     rows = []
     for name, entry in sorted(discover(lenses.GROUP).items()):
         scheme = SCHEMES.get(name)
@@ -331,7 +328,7 @@ def lens_catalogue() -> list[dict[str, Any]]:
 def cmd_train(args: argparse.Namespace) -> int:
     from benchmark.store.cache import cache_root
     from benchmark.store.profiles import get_profile
-    from benchmark.codesign.builtin import START_SPEC
+    from benchmark.codesign.codesigned_lenses import START_SPEC
     from benchmark.codesign.distributed import session
     from benchmark.codesign.schemes import SCHEMES
     from benchmark.codesign.trainer import CoDesign
@@ -555,7 +552,7 @@ def main(argv: list[str] | None = None) -> int:
     silence_known_warnings()
     parser = build_parser()
     args = parser.parse_args(argv)
-    from lenses.registry import DuplicateNameError  # imports torch: after --help has answered
+    from common.plugins import DuplicateNameError  # imports torch: after --help has answered
     if args.command == "run" and args.profile_python_memory and not args.profile_time:
         parser.error("--profile-python-memory traces allocations inside --profile-time's profile; add --profile-time")
     if args.command == "run" and args.all_chains and args.attack:

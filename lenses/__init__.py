@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from lenses.lens import Lens
-from lenses.registry import DuplicateNameError, discover, suggest
+from common.plugins import DuplicateNameError, discover, suggest
 from lenses.spec import LensSpec, LensSpecError, load_spec, parse_spec, spec_to_toml
 from lenses.zernike import zernike_basis
 

@@ -11,7 +11,7 @@ import torch.nn.functional as F
 from scipy.fft import next_fast_len
 
 # Above this PSF size the FFT path is faster on the CPU at 512 x 1024 (measured by
-# tests/benchmarks/test_lens_speed.py::test_convolution_crossover).
+# tests/speed/test_lens_speed.py::test_convolution_crossover).
 FFT_THRESHOLD_PX = 15
 # Spectrum bytes per chunk of the no-grad FFT convolution: each temporary stays well under glibc's
 # 32 MiB mmap ceiling, so it is reused from the heap instead of page-faulted in on every call.

@@ -36,7 +36,7 @@ from lenses.zernike import max_gradient, zernike_basis
 # about 35 px but needs about 260 px for 99.9 % (measured; see README "Modelling choices").
 DIFFRACTION_MARGIN_LAMBDA_F = 40.0
 # A 64-sample pupil leaves 1-2 % L1 error in the PSF from its staircase rim, 128 samples 0.2-0.4 %
-# (against 768 samples; measured in tests/benchmarks/test_modelling_choices.py).
+# (against 768 samples; measured in tests/speed/test_modelling_choices.py).
 MIN_PUPIL_SAMPLES = 128
 
 

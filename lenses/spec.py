@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from lenses.materials import MATERIALS
-from lenses.registry import suggest
+from common.plugins import suggest
 from lenses.zernike import zernike_noll
 
 N_ZERNIKE = 6

@@ -1,4 +1,4 @@
-"""The reference of the batched plate reader's tests and benchmark: ``attacks.plates.ocr.read_plates`` as it
+"""The reference of the batched plate reader's tests and benchmark: ``attacks.readers.plates.ocr.read_plates`` as it
 was before it batched (commit 34064c6), i.e. EasyOCR's public ``Reader.recognize`` on one canvas of the
 prepared crops, which reads them one box at a time on the CPU. tests/ is on sys.path through its conftest.py.
 """
@@ -9,7 +9,7 @@ import numpy as np
 import torch
 
 import attacks
-from attacks.plates import ocr as plate_ocr
+from attacks.readers.plates import ocr as plate_ocr
 from benchmark.scenes import load_scenes
 
 
@@ -66,7 +66,7 @@ def plate_crops(reader, images):
 def assert_backends_read_alike(reference: dict[int, tuple[str, float]], other: dict[int, tuple[str, float]]) -> None:
     """Two backends' ``recognize_rows`` reads agree except where the recognizer is unsure: the same crops,
     confident reads (>= 0.8) the same text, at most 1 crop in 20 (at least 1) a different text, every
-    confidence within 0.05 (tests/attacks/test_ocr_onnx.py says why)."""
+    confidence within 0.05 (tests/attacks/readers/test_ocr_onnx.py says why)."""
     assert set(other) == set(reference)
     confident = [k for k, (_, score) in reference.items() if score >= 0.8]
     assert all(other[k][0] == reference[k][0] for k in confident)

@@ -1,4 +1,4 @@
-"""The layers hold: lenses (physics) <- attacks <- benchmark, inside benchmark one strict order of its
+"""The layers hold: common <- lenses (physics) <- attacks <- benchmark, inside benchmark one strict order of its
 stage packages (store <- scenes <- results <- codesign <- runner <- studies <- publish <- api <- cli),
 and no module imports itself back.
 
@@ -12,9 +12,10 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ("lenses", "attacks", "benchmark")
+PACKAGES = ("common", "lenses", "attacks", "benchmark")
 # What each package may import of ours (anything else of ours is a backward arrow).
-ALLOWED = {"lenses": {"lenses"}, "attacks": {"lenses", "attacks"}, "benchmark": {"lenses", "attacks", "benchmark"}}
+ALLOWED = {"common": {"common"}, "lenses": {"common", "lenses"}, "attacks": {"common", "lenses", "attacks"},
+           "benchmark": {"common", "lenses", "attacks", "benchmark"}}
 # benchmark's stages, bottom to top: each may import only itself and those before it. The package
 # root (`benchmark/__init__.py`, `__main__.py`) stands above them all.
 STAGES = ("store", "scenes", "results", "codesign", "runner", "studies", "publish", "api", "cli")
@@ -163,6 +164,33 @@ def test_the_checks_catch_what_they_look_for():
     assert cycles(graph) == [["benchmark.a", "benchmark.b", "benchmark.c"]]
 
 
-@pytest.mark.parametrize("name", ["benchmark.runner.runner", "benchmark.runner.tasks", "attacks.restorer_training"])
+@pytest.mark.parametrize("name", ["benchmark.runner.runner", "benchmark.runner.tasks", "attacks.training.restorer_training"])
 def test_graph_sees_real_imports(name):
     assert import_graph()[name], f"{name} imports nothing of ours? the ast walk is broken"
+
+
+def duplicate_basenames(paths: list[Path]) -> dict[str, list[str]]:
+    """Basenames of module files (packages' ``__init__`` and ``__main__`` aside) that occur more than once,
+    with where: `grep`, a traceback or an editor tab then names one file."""
+    seen: dict[str, list[str]] = {}
+    for path in paths:
+        if path.name not in ("__init__.py", "__main__.py"):
+            seen.setdefault(path.stem, []).append(str(path.relative_to(ROOT)))
+    return {name: where for name, where in sorted(seen.items()) if len(where) > 1}
+
+
+def test_no_two_modules_share_a_basename():
+    assert duplicate_basenames(list(modules().values())) == {}
+
+
+def test_the_basename_check_fails_on_a_planted_duplicate():
+    planted = list(modules().values()) + [ROOT / "benchmark" / "results" / "charts" / "crops.py"]
+    assert duplicate_basenames(planted) == {"crops": ["common/crops.py", "benchmark/results/charts/crops.py"]}
+
+
+def test_common_is_the_lowest_layer():
+    graph = import_graph()
+    assert {m for m in graph if m.startswith("common")} >= {"common.plugins", "common.offline", "common.plate_render",
+                                                           "common.crops"}
+    planted = {**graph, "common.crops": {"lenses.optics"}}
+    assert backward_imports(planted) == ["common.crops -> lenses.optics"]

@@ -1,6 +1,6 @@
 """A small CNN that reads a plate crop as one classifier per character slot.
 
-Input: the crop of ``attacks.plates.plate_sim.plate_crops`` (B, 3, 24, 96), each channel
+Input: the crop of ``attacks.readers.plates.plate_sim.plate_crops`` (B, 3, 24, 96), each channel
 standardised. Four stages of two 3x3 convolutions (BatchNorm, ReLU), the first three followed by
 2x2 max pooling and the last by pooling the height away; the (B, C, 3, 12) map is flattened and
 one linear layer gives every slot's logits over that slot's alphabet (26 letters or 10 digits), so

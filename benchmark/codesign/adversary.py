@@ -27,7 +27,7 @@ import torch.nn.functional as F
 from tqdm.auto import tqdm
 
 from attacks.networks.red10 import RED10
-from attacks.restorer_training import TRAINING_LAYOUT
+from attacks.training.restorer_training import TRAINING_LAYOUT
 from benchmark.store.cache import config_hash
 from benchmark.codesign.artifacts import load_weights, read_json, save_weights, write_json
 from benchmark.codesign.data import CropSampler, step_generator
@@ -60,7 +60,7 @@ def for_training(net: RED10, device: str) -> RED10:
     copies of 16 MB a quick step, 6 ms each on 2 cores); a quick gp co-design step took 0.79-0.83 s before
     and 0.76-0.77 s after (three rounds each, 2-core AVX-512 machine, 2026-11-29). The values are the
     same; ``save_weights`` stores them contiguous, and evaluation loads them into a default-layout net.
-    The layout is the restorer fits' (``attacks.restorer_training.TRAINING_LAYOUT``), for the same reason."""
+    The layout is the restorer fits' (``attacks.training.restorer_training.TRAINING_LAYOUT``), for the same reason."""
     return net.to(device).to(memory_format=TRAINING_LAYOUT)
 
 

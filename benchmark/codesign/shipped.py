@@ -28,7 +28,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from attacks.shipped_weights import key_text, read_checked
+from attacks.training.shipped_weights import key_text, read_checked
 from benchmark.store.cache import write_verified
 from benchmark.codesign.artifacts import publish_directory
 from benchmark.codesign.curves import PUBLISHED_FILES

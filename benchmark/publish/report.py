@@ -61,7 +61,7 @@ def flags_text(flags: list[Flag]) -> list[str]:
 
 def study_charts(directory: Path, charts: Path) -> list[Path]:
     """Charts of the modelling-choice studies found in `directory`/studies (see benchmark.studies)."""
-    from benchmark.results.charts.nafnet_steps import write_nafnet_steps_chart
+    from benchmark.results.charts.nafnet_steps_chart import write_nafnet_steps_chart
     from benchmark.results.charts.studies import psf_grid_figure, utility_size_figure
     from benchmark.results.charts.utility_pretrain import pretrain_figure
     written = []
@@ -70,7 +70,7 @@ def study_charts(directory: Path, charts: Path) -> list[Path]:
         path = directory / "studies" / f"{name}.json"
         if path.is_file():
             written.append(save_figure(figure(json.loads(path.read_text())), charts / f"{name}.png", dpi=100))
-    steps = directory / "studies" / "nafnet_known_pairs_steps.json"  # written by benchmark.studies.nafnet_steps
+    steps = directory / "studies" / "nafnet_known_pairs_steps.json"  # written by benchmark.studies.nafnet_steps_study
     if steps.is_file():
         written.append(write_nafnet_steps_chart(json.loads(steps.read_text()), charts / f"{steps.stem}.png"))
     return written
@@ -90,7 +90,7 @@ def entry_charts(entries: list[Entry], charts: Path) -> list[Path]:
 
 def observer_chart(directory: Path, entries: list[Entry], charts: Path) -> list[Path]:
     """The ideal-observer ceiling against plate width with the entries' readers on it (if the study exists)."""
-    from benchmark.results.charts.ideal_observer import write_ideal_observer_chart
+    from benchmark.results.charts.ideal_observer_chart import write_ideal_observer_chart
     study = load_study(directory)
     return [] if study is None else [write_ideal_observer_chart(study, entries, charts / "ideal_observer.png")]
 

@@ -1,7 +1,7 @@
 """Re-publish the leaderboard in one command: ``python -m benchmark publish``.
 
 One run of every registered lens (or those named) at the profile's seeds with the standard ensemble
-(`benchmark.results.ensemble_choice.STANDARD_ENSEMBLE`), whose entries then replace the published ones
+(`benchmark.runner.defaults.STANDARD_ENSEMBLE`), whose entries then replace the published ones
 whole (`leaderboard.publish(..., replace=True)`): nothing measured by an older version stays beside
 the new rows. The run's tasks are cached as they finish, so the same command after an interruption
 resumes where it stopped, also after a commit that changed only docs, tests or the publishing code

@@ -1,12 +1,12 @@
 """Ship a lens-independent trained attacker's weights in the package: ``python -m benchmark pretrain-attacker``.
 
 Two qualify: ``learned-reader``'s pre-training on sharp plates (``ship_reader``; every lens's fit
-starts from it) and ``nafnet-generic`` (its training knows no lens, see ``attacks.nafnet_generic``). The
+starts from it) and ``nafnet-generic`` (its training knows no lens, see ``attacks.restorers.nafnet_generic``). The
 command fits it exactly as a run does (the profile's budget, the TRAIN crops of the seed; loaded from
 the cache when a run already trained it), then writes ``attacks/weights/nafnet-generic-<profile>-s<seed>
 .safetensors`` and its provenance: the cache key the attacker will look it up by, the commit, the
 fit seconds (None when it came from the cache), and a check score that
-``tests/attacks/test_shipped_weights.py`` re-measures: the mean PSNR on ``CHECK_CROPS`` training crops
+``tests/attacks/training/test_shipped_weights.py`` re-measures: the mean PSNR on ``CHECK_CROPS`` training crops
 degraded by a fixed draw of the generic degradations, before and after the network.
 """
 
@@ -21,13 +21,13 @@ import torch
 from safetensors.torch import save as save_safetensors
 
 import lenses
-from attacks.degradations import degrade
-from attacks.gray_world import gray_world_balance
-from attacks.learned_reader import LearnedReader, pack_weights, pretrain, pretrained_key
-from attacks.plates.plate_render import PLATE_FORMAT
-from attacks.nafnet_generic import NafnetGeneric
-from attacks.restorer_training import collect_pairs
-from attacks.shipped_weights import write_shipped
+from attacks.training.degradations import degrade
+from attacks.restorers.gray_world import gray_world_balance
+from attacks.readers.learned_reader import LearnedReader, pack_weights, pretrain, pretrained_key
+from common.plate_render import PLATE_FORMAT
+from attacks.restorers.nafnet_generic import NafnetGeneric
+from attacks.training.restorer_training import collect_pairs
+from attacks.training.shipped_weights import write_shipped
 from benchmark.store.cache import cache_root
 from benchmark.results.metrics import psnr
 from benchmark.store.profiles import Profile, get_profile
@@ -63,7 +63,7 @@ def check_scores(attacker: NafnetGeneric, ctx: Any) -> dict[str, float]:
 
 def ship_reader(args: argparse.Namespace) -> int:
     """Pre-train ``learned-reader`` on sharp plates (seeded; the profile plays no part) and ship it
-    with its held-out curve, which ``tests/attacks/test_learned_reader.py`` checks the weights against."""
+    with its held-out curve, which ``tests/attacks/readers/test_learned_reader.py`` checks the weights against."""
     net = LearnedReader.build(PLATE_FORMAT, args.seed)
     curve = pretrain(net, PLATE_FORMAT, args.seed)
     made = {"commit": git_commit(), "command": f"python -m benchmark pretrain-attacker learned-reader --seed {args.seed}",

@@ -3,7 +3,7 @@
 The command co-designs the lens exactly as a run does (or loads the run from the cache), copies the
 finished run folder into ``benchmark/codesign/shipped/`` (``benchmark.codesign.shipped``), and fits
 the lens's known-pairs NAFNet and fine-tunes its learned reader, whose weights go to ``attacks/weights/``
-under the key a run looks them up by (``attacks.shipped_weights``). A fresh ``python -m benchmark run
+under the key a run looks them up by (``attacks.training.shipped_weights``). A fresh ``python -m benchmark run
 --lens NAME`` at that profile and seed then neither co-designs nor fits those attackers; every number it
 prints is the same.
 
@@ -24,12 +24,12 @@ from typing import Any
 import torch
 from safetensors.torch import save as save_safetensors
 
-from attacks.learned_reader import LearnedReader, pack_weights
-from attacks.nafnet_known_pairs import NafnetKnownPairs
-from attacks.restorer_training import collect_pairs, random_crops
-from attacks.shipped_weights import write_shipped
+from attacks.readers.learned_reader import LearnedReader, pack_weights
+from attacks.restorers.nafnet_known_pairs import NafnetKnownPairs
+from attacks.training.restorer_training import collect_pairs, random_crops
+from attacks.training.shipped_weights import write_shipped
 from benchmark.store.cache import cache_root
-from benchmark.codesign.builtin import START_SPEC, attach
+from benchmark.codesign.codesigned_lenses import START_SPEC, attach
 from benchmark.codesign.schemes import SCHEMES
 from benchmark.codesign.shipped import ship_run
 from benchmark.codesign.trainer import CoDesign

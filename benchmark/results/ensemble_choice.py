@@ -16,8 +16,8 @@ ensemble plate accuracy by more than ``PLATE_POINTS`` points or its ensemble PSN
 ``PSNR_DB`` dB. The issue adds ``lpdr`` (the paper's detector pipeline) on the sensor image and after
 the strongest restorer (the one that is the best restorer on the most scenes of the entries), and the
 learned reader, which the rule keeps once entries hold it. ``PROPOSED_ENSEMBLE`` is what that selects on the published quick
-entries (docs/ensemble.md, written by ``python -m benchmark.studies.ensemble_choice``;
-tests/benchmark/test_ensemble_choice.py recomputes it, so it cannot drift from the entries).
+entries (docs/ensemble.md, written by ``python -m benchmark.studies.ensemble_choice_study``;
+tests/benchmark/results/test_ensemble_choice.py recomputes it, so it cannot drift from the entries).
 
 ``STANDARD_ENSEMBLE`` is the run's default (benchmark.runner.runner.standard_selection): the proposal (with
 the learned reader on the sensor image) and the ``raw`` reference (the uncorrected image's PSNR, no chain).
@@ -34,7 +34,7 @@ import numpy as np
 from benchmark.results.ensemble import RESTORER_KINDS, plate_ensemble, seed_scenes
 from benchmark.results.entries import Entry
 
-__all__ = ["ChainEffect", "PLATE_POINTS", "PROPOSED_ENSEMBLE", "PSNR_DB", "STANDARD_ENSEMBLE", "DOCS", "keeps", "proposed_ensemble",
+__all__ = ["ChainEffect", "PLATE_POINTS", "PSNR_DB", "DOCS", "keeps", "proposed_ensemble",
            "removal_effects", "strongest_restorer", "ensemble_values"]
 
 # The rule's thresholds: a chain whose removal moves some lens's ensemble by more than this stays.
@@ -43,20 +43,6 @@ PSNR_DB = 0.1
 # The paper's detector pipeline: kept on the sensor image and after the strongest restorer.
 PAPER_READER = "lpdr"
 DOCS = "docs/ensemble.md"
-
-# What the rule selects on the published quick entries (see the module docstring and DOCS); the test
-# recomputes it from leaderboard/entries/*quick*.json.
-PROPOSED_ENSEMBLE: tuple[str, ...] = (
-    "demosaic-vng", "demosaic-vng>lpdr-oracle", "learned-reader", "lpdr", "lpdr-oracle", "nafnet-known-pairs",
-    "nafnet-known-pairs>lpdr-oracle", "richardson-lucy-known-psf", "richardson-lucy-known-psf>lpdr",
-    "training-adversary", "training-adversary>lpdr-oracle", "wiener-known-psf", "wiener-known-psf>lpdr-oracle")
-
-LEARNED_READER = "learned-reader"
-# The run's default chains: the proposal and the uncorrected image as a reference restorer. The learned
-# reader is always in it (the rule keeps it wherever entries hold it) and stays last of the readers, the
-# order the published entries' runs evaluated their chains in.
-STANDARD_ENSEMBLE: tuple[str, ...] = tuple(c for c in PROPOSED_ENSEMBLE if c != LEARNED_READER) + (LEARNED_READER, "raw")
-
 
 @dataclasses.dataclass(frozen=True)
 class ChainEffect:

@@ -7,7 +7,7 @@ without a lens, so a lens earns no privacy there. The width is measured, not cho
 the standard ensemble read the sharp plate windows of the quick profile (seed 0, no lens), per width
 bin, and the start is the lower edge of the smallest bin where the best of them reads >= half the
 plates. The measurement ships as ``readable_start.json`` beside this module, with its counts and
-provenance; ``python -m benchmark.studies.readable_start`` re-measures it (after the sharp reader or
+provenance; ``python -m benchmark.studies.readable_start_study`` re-measures it (after the sharp reader or
 the scenes change).
 """
 
@@ -43,7 +43,7 @@ def measured_start(bins_px: Sequence[int], path: Path = MEASUREMENT, missing_px:
         RuntimeError: the file is malformed, its start does not follow from its counts, or it is not
             a lower edge of `bins_px`; the message says how to re-measure it.
     """
-    remedy = "re-measure it with `python -m benchmark.studies.readable_start`"
+    remedy = "re-measure it with `python -m benchmark.studies.readable_start_study`"
     if not path.exists():
         warnings.warn(f"no readable-start measurement at {path}: plates are readable from {missing_px} px until "
                       f"it is measured; {remedy}", stacklevel=2)

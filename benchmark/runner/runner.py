@@ -23,7 +23,7 @@ from benchmark.runner.planning import AttackerRef, Task, plan, run_directory
 from benchmark.runner.tasks import TaskResult
 from benchmark.store.provenance import provenance
 from benchmark.runner.config import RunConfig
-from benchmark.results.ensemble_choice import STANDARD_ENSEMBLE
+from benchmark.runner.defaults import STANDARD_ENSEMBLE
 from benchmark.results.schema import Results as ResultsFile
 from benchmark.results.schema import Row, RowError, settings_hash, write_results
 

@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 import lenses
-from attacks.crops import random_crops
+from common.crops import random_crops
 from benchmark.runner.config import RunConfig
 from benchmark.scenes import Scene, load_scenes
 from benchmark.scenes.windows import PlateWindow

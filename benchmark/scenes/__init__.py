@@ -10,7 +10,7 @@ from __future__ import annotations
 from .dataset import SceneDataset
 from .labels import CLASS_NAMES, IGNORE_ID, PALETTE, TRAIN_ID, colorize
 from .loading import SCENE_SETS, SPLITS, load_scene, load_scenes, scene_seed
-from .plates import PLATE_FORMAT, matches_format, plate_entropy_bits, random_plate_text, render_plate
+from common.plate_render import PLATE_FORMAT, matches_format, plate_entropy_bits, random_plate_text, render_plate
 from .records import Box, Plate, Scene, Vehicle
 
 __all__ = [

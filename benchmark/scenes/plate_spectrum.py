@@ -31,7 +31,7 @@ import numpy as np
 from benchmark.store.cache import config_hash, read_verified_json, write_verified_json
 
 from benchmark.scenes import load_scene
-from benchmark.scenes.plates import PLATE_SIZE_M
+from common.plate_render import PLATE_SIZE_M
 from benchmark.scenes.records import Scene
 from lenses.bound import PlateSpectrum
 

@@ -17,7 +17,7 @@ import numpy as np
 from .camera import Camera, Point
 from .canvas import Canvas, Colour, Surface
 from .labels import TRAIN_ID
-from .plates import PLATE_SIZE_M, random_plate_text, render_plate
+from common.plate_render import PLATE_SIZE_M, random_plate_text, render_plate
 from .records import Box, Plate, Scene, Vehicle
 from .street_objects import (BUS, CAR, TRAM, TRUCK, Tint, VehicleKind, draw_person, draw_sign, draw_street_lamp,
                              draw_traffic_light, draw_tree, draw_two_wheeler, draw_vehicle,

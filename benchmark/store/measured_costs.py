@@ -47,7 +47,7 @@ def run_text(profile: str) -> str:
 def is_codesigned(lens: str) -> bool | None:
     """True for a registered co-designed lens, False for another registered one, None for a name the
     registry does not know (a spec file, a plugin lens not installed)."""
-    from lenses.registry import discover  # lazy: entry-point discovery only when a plan asks
+    from common.plugins import discover  # lazy: entry-point discovery only when a plan asks
     ep = discover("privacy_lens_bench.lenses").get(lens)
     return None if ep is None else ep.value.startswith(CODESIGN_MODULE)
 

@@ -11,7 +11,7 @@ import dataclasses
 from dataclasses import dataclass
 
 from benchmark.store.measured_costs import run_text
-from lenses.registry import suggest
+from common.plugins import suggest
 
 
 @dataclass(frozen=True)

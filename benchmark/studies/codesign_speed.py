@@ -28,7 +28,7 @@ import torch
 
 from benchmark.codesign import trainer
 from benchmark.codesign import adversary
-from benchmark.codesign.builtin import START_SPEC
+from benchmark.codesign.codesigned_lenses import START_SPEC
 from benchmark.codesign.schemes import SCHEMES
 from benchmark.store.profiles import get_profile
 from benchmark.store.provenance import provenance

@@ -7,7 +7,7 @@ the PSF at each width's own object distance (`lenses.depth.plate_distance_m`), t
 object plane suffices. Each lens's record keeps the lens spec it was computed for (`lens_spec`), so
 the leaderboard shows a ceiling only beside an entry of that very lens (benchmark.results.observer.published).
 Writes leaderboard/studies/ideal_observer.json and its chart leaderboard/charts/ideal_observer.png
-(benchmark.results.charts.ideal_observer, re-rendered by `python -m benchmark report` with the readers on it).
+(benchmark.results.charts.ideal_observer_chart, re-rendered by `python -m benchmark report` with the readers on it).
 """
 
 from __future__ import annotations
@@ -147,8 +147,8 @@ def merge_study(out_json: Path, part_json: Path, names: tuple[str, ...]) -> dict
 
 
 def write_chart(record: dict, path: Path) -> Path:
-    """The study's chart (benchmark.results.charts.ideal_observer) with the published entries' readers on it."""
-    from benchmark.results.charts.ideal_observer import write_ideal_observer_chart
+    """The study's chart (benchmark.results.charts.ideal_observer_chart) with the published entries' readers on it."""
+    from benchmark.results.charts.ideal_observer_chart import write_ideal_observer_chart
     from benchmark.results.entries import load_entries
     return write_ideal_observer_chart(record, load_entries(path.parent.parent), path)
 

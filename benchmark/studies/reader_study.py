@@ -11,7 +11,7 @@ and every bin is checked against the lens's T = 1 ceiling (`benchmark.results.ob
 violations logged as errors and kept in the record.
 
 Writes leaderboard/studies/ideal_observer_readers.json; the ceiling chart draws it
-(benchmark.results.charts.ideal_observer). Cost: the ideal observer's beam search takes seconds per plate,
+(benchmark.results.charts.ideal_observer_chart). Cost: the ideal observer's beam search takes seconds per plate,
 so the sample is a few plates per width bin and lens (`n_plates`), stated in the record.
 """
 

@@ -131,9 +131,9 @@ def test_registered_name_must_match_class_name(site):
 def test_builtins_are_registered_by_entry_point():
     registered = attacks.available()
     for name, target in {
-        "identity": "attacks.identity:Identity",
-        "wiener-known-psf": "attacks.wiener_known_psf:WienerKnownPSF",
-        "gray-world": "attacks.gray_world:GrayWorld",
+        "identity": "attacks.restorers.identity:Identity",
+        "wiener-known-psf": "attacks.restorers.wiener_known_psf:WienerKnownPSF",
+        "gray-world": "attacks.restorers.gray_world:GrayWorld",
     }.items():
         assert registered.get(name) == target, f"pyproject.toml must register {name} = {target!r}"
 
@@ -143,7 +143,7 @@ def test_a_file_plugin_named_like_a_registered_attacker_is_an_error_naming_both(
     path.write_text(PLUGIN_SOURCE.format(cls="Dup", name="identity"))
     with pytest.raises(DuplicatePluginError, match=r"'identity' is defined twice") as info:
         attacks.load_all([f"{path}:Dup"])
-    assert f"file {path}:Dup" in str(info.value) and "attacks.identity:Identity" in str(info.value)
+    assert f"file {path}:Dup" in str(info.value) and "attacks.restorers.identity:Identity" in str(info.value)
     first, second = tmp_path / "a.py", tmp_path / "b.py"
     first.write_text(PLUGIN_SOURCE.format(cls="A", name="mine"))
     second.write_text(PLUGIN_SOURCE.format(cls="B", name="mine"))

@@ -48,7 +48,7 @@ def test_mask_formats_the_parser_offers_are_the_exporters():
 
 
 def test_run_help_names_exactly_the_standard_chains_and_the_attackers_that_run_by_default(capsys):
-    from benchmark.results.ensemble_choice import STANDARD_ENSEMBLE
+    from benchmark.runner.defaults import STANDARD_ENSEMBLE
     with pytest.raises(SystemExit):
         cli.main(["run", "--help"])
     text = " ".join(capsys.readouterr().out.split()).replace("- ", "-")  # undo argparse's wrapping

@@ -6,12 +6,12 @@ those resizes (a scatter kernel: about 13 ms for one (8, 256, 32, 32) map on 2 c
 around it took about a fifth of a quick co-design step (torch.profiler, 2026-11-29). The same resize is
 ``A_h @ x @ A_w^T`` with fixed (out, in) weight matrices of two non-zeros a row, whose forward and
 backward are dense matrix products; the first stage, already at the target size, is not resized at all
-(``F.interpolate`` copies it). tests/benchmarks/test_training_step_speed.py times both in one run:
+(``F.interpolate`` copies it). tests/speed/test_training_step_speed.py times both in one run:
 a quick utility-net step 1.14-1.25x, a quick gp co-design step 1.10-1.21x (2-core AVX-512 machine).
 
 The weights are torch's own (``area_pixel_compute_source_index`` with ``align_corners=False``: source
 ``(dst + 0.5) * in / out - 0.5``, clamped at 0, both neighbours' lambdas), so the result equals
-``F.interpolate``'s up to float rounding (tests/benchmark/test_bilinear.py); only the order of the
+``F.interpolate``'s up to float rounding (tests/benchmark/codesign/test_bilinear.py); only the order of the
 additions differs. Inference keeps ``F.interpolate`` (`resize_for_training` falls back to it when no
 gradient flows), so every evaluated number stays bit for bit what it was.
 """

@@ -8,11 +8,9 @@ The network is Hugging Face ``transformers``' ``SegformerForSemanticSegmentation
 
 from __future__ import annotations
 
-import os
 import re
 
-os.environ.setdefault("HF_HUB_OFFLINE", "1")
-os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
+import common.offline  # noqa: F401  (before transformers: nothing in it tries the network)
 
 from collections.abc import Callable, Mapping  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -54,7 +52,7 @@ class TrainingDecodeHead(SegformerDecodeHead):
 
     The same weights and submodules as ``SegformerDecodeHead`` (`build_segformer` swaps the class of
     the head it built, so initialisation and the random stream are untouched); the values equal the
-    original's up to float rounding (tests/benchmark/test_bilinear.py), and inference, run without a
+    original's up to float rounding (tests/benchmark/codesign/test_bilinear.py), and inference, run without a
     gradient, is the original to the bit.
     """
 

@@ -2,7 +2,7 @@
 
 On the 2-core CPU, ONNX Runtime runs SegFormer-B0's sliding-window inference (the quick profile's
 256 x 256 windows, 8 at a time, 2 threads) 1.5-2.2x as fast as eager torch (1.86x in
-tests/benchmarks/test_segformer_speed.py, which asserts that it wins, before the head was folded;
+tests/speed/test_segformer_speed.py, which asserts that it wins, before the head was folded;
 2.17x with it, load 6), so evaluation on the CPU
 uses it by default. The backend is fixed, not timed per run as the restorers' ``"auto"`` is, so the same
 weights on the same machine always give the same predictions (the two backends differ by ~1e-7 in
@@ -16,7 +16,7 @@ channels at a quarter of the input resolution, about three quarters of B0's mult
 and its batch norm folded into each stage's projection, which is exact algebra (bilinear upsampling is
 linear and keeps constants), so the logits agree with ``segment_logits`` to float rounding (~1e-5)
 while ONNX Runtime runs 1.5x as fast on one thread (8 quick windows: 0.63 s against 0.95 s, load 4.5;
-the lpdr vehicle stage 1.34x at load 7.5 in tests/benchmarks/test_lpdr_chain_speed.py).
+the lpdr vehicle stage 1.34x at load 7.5 in tests/speed/test_lpdr_chain_speed.py).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from attacks.onnx_backend import InferenceEngine, check_backend, export_onnx
+from attacks.backends.onnx_runtime import InferenceEngine, check_backend, export_onnx
 from benchmark.store.cache import ArtifactCache
 from benchmark.codesign.utility.segformer import IMAGENET_MEAN, IMAGENET_STD, segment_logits
 

@@ -15,7 +15,7 @@ from matplotlib.container import ErrorbarContainer
 from matplotlib.figure import Figure
 
 from benchmark.results.charts import new_figure, save_figure
-from benchmark.results.charts.labels import wrap_label
+from benchmark.results.charts.point_labels import wrap_label
 from benchmark.results.plate_scoring import WIDTH_BINS_PX
 from benchmark.results.stats import wilson_interval
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmark.results.charts.bound import write_bound_chart
+from benchmark.results.charts.bound_chart import write_bound_chart
 from benchmark.results.charts.plate_width import write_plate_width_chart
 from benchmark.results.charts.restorers import restorer_points, write_restorer_speed_chart
 from benchmark.results.schema import Row

@@ -11,7 +11,7 @@ import matplotlib
 from matplotlib.figure import Figure
 
 from benchmark.results.charts import new_figure, save_figure
-from benchmark.results.charts.labels import LABEL_FONT_PT, label_points, line_height_in
+from benchmark.results.charts.point_labels import LABEL_FONT_PT, label_points, line_height_in
 from benchmark.results import pooled
 from benchmark.results.entries import Entry
 from benchmark.results.pooled import Pooled

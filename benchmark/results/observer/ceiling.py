@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from attacks.plates.plate_render import PLATE_FORMAT, PLATE_SIZE_M, format_alphabets, random_plate_text, render_plate
+from common.plate_render import PLATE_FORMAT, PLATE_SIZE_M, format_alphabets, random_plate_text, render_plate
 from lenses.depth import plate_distance_m
 from lenses.lens import Lens
 from lenses.raw_likelihood import draw_statistics, log_likelihoods, raw_mean_electrons

@@ -8,7 +8,7 @@ import torch
 
 from attacks.networks.red10 import RED10
 from benchmark.codesign.adversary import MARGIN_DB, Probe, build_adversary, pretrain_adversary, white_balanced
-from benchmark.codesign.builtin import START_SPEC
+from benchmark.codesign.codesigned_lenses import START_SPEC
 from benchmark.codesign.coefficients import initial_coefficients
 from benchmark.codesign.data import CropSampler
 from benchmark.store.profiles import PROFILES

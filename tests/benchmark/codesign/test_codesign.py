@@ -7,7 +7,7 @@ import pytest
 import torch
 
 import lenses
-from benchmark.codesign.builtin import START_SPEC, attach
+from benchmark.codesign.codesigned_lenses import START_SPEC, attach
 from benchmark.codesign.coefficients import INITIAL_AMPLITUDE_UM, bound_limited
 from benchmark.codesign.data import CropSampler
 from benchmark.codesign.schemes import SCHEMES

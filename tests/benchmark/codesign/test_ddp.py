@@ -12,7 +12,7 @@ import torch
 import torch.distributed as dist
 import torch.multiprocessing as mp
 
-from benchmark.codesign.builtin import START_SPEC
+from benchmark.codesign.codesigned_lenses import START_SPEC
 from benchmark.codesign.schemes import SCHEMES
 from benchmark.codesign.trainer import CoDesign
 from benchmark.store.profiles import PROFILES

@@ -10,7 +10,7 @@ from torch.func import functional_call
 
 from benchmark.codesign.adversary import build_adversary
 from benchmark.codesign.balancing import GradientPenalty, OpticsContext
-from benchmark.codesign.builtin import START_SPEC
+from benchmark.codesign.codesigned_lenses import START_SPEC
 from benchmark.codesign.coefficients import initial_coefficients
 from benchmark.codesign.data import step_generator
 from benchmark.codesign.replicas import SingleProcess

@@ -10,9 +10,9 @@ import shutil
 import pytest
 import torch
 
-from attacks.nafnet_known_pairs import NafnetKnownPairs
-from attacks.shipped_weights import SHIPPED_DIR as ATTACK_WEIGHTS
-from benchmark.codesign.builtin import attach
+from attacks.restorers.nafnet_known_pairs import NafnetKnownPairs
+from attacks.training.shipped_weights import SHIPPED_DIR as ATTACK_WEIGHTS
+from benchmark.codesign.codesigned_lenses import attach
 from benchmark.codesign.shipped import SHIPPED_DIR, ShippedLensError, install_shipped
 from benchmark.publish.ship_lens import codesign_run, known_pairs_check, lens_check, run_config
 from benchmark.store.profiles import PROFILES

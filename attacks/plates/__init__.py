@@ -1,5 +1,0 @@
-"""The stages of the licence-plate attack (``attacks/lpdr.py``), one module each.
-
-vehicles (segmentation or ground truth) -> plate detection inside each vehicle (CRAFT or
-OpenCV) -> OCR (EasyOCR english_g2), with EasyOCR's weights loaded offline.
-"""

@@ -1,0 +1,67 @@
+"""`python -m benchmark publish`: one resumable run of the lenses with the standard ensemble whose entries
+replace the published ones whole, with a progress bar over the plan's estimated seconds."""
+
+from __future__ import annotations
+
+import io
+from types import SimpleNamespace
+
+import pytest
+
+import benchmark
+from benchmark import cli
+from benchmark.publish import leaderboard, republish
+from benchmark.runner.defaults import STANDARD_ENSEMBLE
+from benchmark.results.entries import read_entry
+from benchmark.runner.task_costs import Estimate
+from benchmark.store.measured_costs import Quote
+from benchmark.store.profiles import get_profile
+
+
+def _task(key, kind, seconds=None, cached=False, table=None, seed=0, lens="l"):
+    return SimpleNamespace(key=key, kind=kind, seed=seed, lens=lens, cached=cached,
+                           estimate=Estimate(seconds, 0 if table is not None or seconds is None else 3, table))
+
+
+def test_task_weights_count_each_task_once_at_its_estimate():
+    together = Quote(6.0, True, False, "m", None)
+    planned = [_task("a", "fit", 10.0), _task("b", "fit", 30.0), _task("c", "fit"),  # c: the fits' median
+               _task("d", "evaluate"),                                            # no evaluate known: all's median
+               _task("e", "lens", 99.0, cached=True),                             # read back
+               _task("f", "lens", None, table=Quote(None, False, False, "m", None)),  # installed
+               _task("g", "fit", 6.0, table=together), _task("h", "fit", 6.0, table=together),
+               _task("i", "fit", 6.0, table=together, lens="other")]
+    weights = republish.task_weights(planned)
+    # g and h share one figure for their lens; i has it alone; the median of the known is taken before.
+    assert weights.seconds == {"a": 10.0, "b": 30.0, "c": 6.0, "d": 6.0, "e": republish.CACHED_S,
+                               "f": republish.CACHED_S, "g": 3.0, "h": 3.0, "i": 6.0}
+    assert weights.guessed == 2 and weights.total == pytest.approx(sum(weights.seconds.values()))
+    bar = republish.EtaBar(weights, file=io.StringIO())
+    for t in planned[:3]:
+        bar(t)
+    assert bar.bar.n == pytest.approx(46.0) and bar.done == ["a", "b", "c"]
+    bar.close()
+
+
+def test_publish_replaces_entries_whole_and_resumes_from_the_cache(tmp_path, capsys):
+    board, out = tmp_path / "board", tmp_path / "run"
+    (board / "entries").mkdir(parents=True)
+    old = benchmark.run(["defocus"], ["identity", "lpdr-oracle"], profile="smoke", out=tmp_path / "old")
+    leaderboard.publish_run(old.output.rows, get_profile("smoke").to_dict(), old.output.lens_info, tmp_path / "old",
+                            board, old.output.settings)
+    entry = board / "entries" / "defocus__smoke__synthetic.json"
+    assert "identity" in {r.attack for r in read_entry(entry).rows}
+    argv = ["publish", "--lens", "defocus", "--profile", "smoke", "--seeds", "0", "--dir", str(board), "--out", str(out)]
+    assert cli.main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "publish defocus (smoke, seeds 0):" in printed and "published 2 leaderboard entries" in printed
+    attacks = {r.attack for r in read_entry(entry).rows if r.kind in ("restorer", "reader", "chain", "reference")}
+    # The older run's identity rows are gone; only the standard ensemble's chains are there (the known-PSF
+    # and learned attackers of a fixed lens: training-adversary skips it).
+    assert attacks <= set(STANDARD_ENSEMBLE) and "identity" not in attacks
+    assert {"learned-reader", "wiener-known-psf>lpdr-oracle", "richardson-lucy-known-psf>lpdr"} <= attacks
+    # Run again: every task comes from the cache.
+    plan = benchmark.plan(["defocus"], profile="smoke", seeds=[0])
+    assert all(t.cached for t in plan.tasks)
+    assert cli.main(argv) == 0
+    assert "(0 to compute," in capsys.readouterr().out

@@ -1,0 +1,99 @@
+"""The standard ensemble (benchmark.runner.defaults.STANDARD_ENSEMBLE) is the run's default:
+only its chains are measured, a restorer no chain reads never has its plate windows restored, and
+`--attack` / `all_chains` still give exactly what they name (every reader after every restorer)."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+import attacks
+from benchmark import api
+from benchmark.runner.defaults import PROPOSED_ENSEMBLE, STANDARD_ENSEMBLE
+from benchmark.runner import runner
+from benchmark.runner.config import RunConfig
+from benchmark.runner.evaluation import Attacked, PlateSet, ReadyReader, Target, read_sensor, run_restorers
+from benchmark.runner.planning import run_directory
+from benchmark.runner.rows import RowBuilder
+from benchmark.runner.sensing import to_tensor
+from benchmark.scenes import load_scenes
+from benchmark.store.profiles import get_profile
+
+
+class Counting(attacks.Restorer):
+    threat_model = attacks.ThreatModel.SENSOR_ACCESS
+
+    def __init__(self, name: str) -> None:
+        super().__init__()
+        self.name = name  # type: ignore[misc]
+        self.shapes: list[tuple[int, ...]] = []
+
+    def restore(self, sensor: torch.Tensor) -> torch.Tensor:
+        self.shapes.append(tuple(sensor.shape))
+        return sensor.flip(-1)
+
+
+class Blind(attacks.Reader):
+    name = "blind"
+    threat_model = attacks.ThreatModel.SENSOR_ACCESS
+
+    def read(self, images, hints=None):
+        return [[] for _ in range(images.shape[0])]
+
+
+def _evaluate(chains):
+    cfg = RunConfig(["fake"], None, "synthetic", get_profile("smoke"), [0], chains=chains)
+    scenes = load_scenes("synthetic", "val", 3, (64, 128), 0)
+    sensor = to_tensor(scenes)
+    windows = [sensor[0, :, :32, :48].clone(), sensor[1, :, 8:40, 16:80].clone()]
+    plates = PlateSet(scenes=scenes[:2], sharp=windows, sensor=windows, n_frames=2)
+    target = Target("fake", scenes, sensor, sensor, attacks.FitContext(), None, None, plates=plates)
+    read, unread = Counting("read"), Counting("unread")
+    out = Attacked()
+    builder = RowBuilder(cfg, "fake", 0, {"lens": "fake"}, {"device": "cpu"})
+    ready = [ReadyReader(Blind(), None, {"name": "blind"})]
+    read_sensor(target, ready, cfg, builder, out)
+    run_restorers(target, [read, unread], {}, cfg, builder, out, ready)
+    out.finish()
+    return [r.attack for r in out.rows], read, unread, sensor.shape
+
+
+def test_only_the_chains_of_the_ensemble_are_read_and_their_restorers_windows_restored():
+    attacks_measured, read, unread, frames = _evaluate(("read", "unread", "blind", "read>blind"))
+    assert attacks_measured == ["read", "unread", "blind", "read>blind"]
+    # Both restorers are scored on the frames; only the one a chain reads restores the plate windows.
+    assert [s for s in unread.shapes if s[-2:] != frames[-2:]] == []
+    assert [s for s in read.shapes if s[-2:] != frames[-2:]]
+    everything, *_ = _evaluate(None)  # the full cross product
+    assert sorted(everything) == sorted(["read", "unread", "blind", "read>blind", "unread>blind"])
+
+
+def test_the_standard_ensemble_is_the_proposal_with_the_learned_reader_and_the_raw_reference():
+    assert set(STANDARD_ENSEMBLE) == set(PROPOSED_ENSEMBLE) | {"learned-reader", "raw"}
+    assert len(STANDARD_ENSEMBLE) == len(set(STANDARD_ENSEMBLE)) and STANDARD_ENSEMBLE[-2:] == ("learned-reader", "raw")
+    named = runner.standard_attackers()
+    assert len(named) == len(set(named)) and set(named) == {p for c in STANDARD_ENSEMBLE for p in c.split(">")}
+    # Every reader chain of the ensemble reads with a reader, after a restorer that is in it.
+    for chain in STANDARD_ENSEMBLE:
+        if ">" in chain:
+            restorer, reader = chain.split(">")
+            assert isinstance(attacks.load(restorer), attacks.Restorer) and isinstance(attacks.load(reader), attacks.Reader)
+            assert restorer in STANDARD_ENSEMBLE
+
+
+def test_default_attackers_are_the_standard_ensemble_and_named_ones_are_exactly_what_they_name(tmp_path):
+    cfg, selection = api._configure(["ideal"], None, "smoke", [0], "synthetic", "cpu", "local", None, 30, None)
+    assert cfg.chains == STANDARD_ENSEMBLE
+    assert {r.name for r in selection.restorers + selection.readers} == set(runner.standard_attackers())
+    named, _ = api._configure(["ideal"], ["wiener-known-psf", "lpdr"], "smoke", [0], "synthetic", "cpu", "local",
+                              None, 30, None)
+    assert named.chains is None and named.wants("wiener-known-psf>lpdr")
+    full, chosen = api._configure(["ideal"], None, "smoke", [0], "synthetic", "cpu", "local", None, 30, None,
+                                  all_chains=True)
+    assert full.chains is None and "identity" in {r.name for r in chosen.restorers}
+    # Two runs that measure different chains never share task results.
+    cfg.cache_dir = full.cache_dir = tmp_path
+    assert run_directory(cfg, selection.restorers, selection.readers) != run_directory(
+        RunConfig(**{**cfg.__dict__, "chains": None}), selection.restorers, selection.readers)
+    with pytest.raises(TypeError, match="all_chains"):
+        api._configure(["ideal"], None, "smoke", [0], "synthetic", "cpu", "local", None, 30, None, all_chains="yes")

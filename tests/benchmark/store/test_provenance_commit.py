@@ -1,0 +1,53 @@
+"""The commit stamped on results is read once per process, when the run starts; the CPU is named with
+its model, torch's vector instructions and its cores."""
+
+import os
+import subprocess
+
+import torch
+
+from benchmark.store import provenance
+
+
+def test_commit_is_read_once_per_process(monkeypatch):
+    provenance.git_commit.cache_clear()
+    first = provenance.git_commit()
+    calls = []
+    monkeypatch.setattr(subprocess, "run", lambda *a, **k: calls.append(a) or (_ for _ in ()).throw(OSError()))
+    assert provenance.git_commit() == first and calls == []  # a later HEAD would not be consulted
+    provenance.git_commit.cache_clear()
+    assert provenance.git_commit() == "unknown" and calls  # without the cache it would be
+    monkeypatch.undo()
+    provenance.git_commit.cache_clear()
+
+
+def test_the_cpu_is_named_by_model_instructions_and_cores(tmp_path):
+    info = tmp_path / "cpuinfo"
+    info.write_text("processor\t: 0\nvendor_id\t: GenuineIntel\nmodel name\t: Intel(R)  Xeon(R) Gold 6338\n"
+                    "processor\t: 1\nmodel name\t: Intel(R)  Xeon(R) Gold 6338\n")
+    assert provenance.cpu_model.__wrapped__(info) == "Intel(R) Xeon(R) Gold 6338"
+    assert provenance.cpu_model.__wrapped__(tmp_path / "missing") != ""  # falls back to platform
+    described = provenance.describe_device("cpu")
+    assert described.startswith(f"cpu:{provenance.cpu_model()} (")
+    assert f"({torch.backends.cpu.get_cpu_capability()}, {os.cpu_count()} cores)" in described
+
+
+def test_code_version_follows_what_results_depend_on(tmp_path):
+    files = {"lenses/optics.py": "a", "attacks/readers/lpdr.py": "b", "benchmark/runner/tasks.py": "c",
+             "benchmark/publish/report.py": "d", "benchmark/studies/s.py": "e", "benchmark/cli.py": "f",
+             "benchmark/results/charts/plot.py": "g", "attacks/README.md": "h", "attacks/weights/w.safetensors": "i"}
+    for rel, text in files.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
+    base = provenance.code_digest(tmp_path)
+    for rel in ("benchmark/publish/report.py", "benchmark/studies/s.py", "benchmark/cli.py",
+                "benchmark/results/charts/plot.py", "attacks/README.md"):
+        (tmp_path / rel).write_text("changed")
+        assert provenance.code_digest(tmp_path) == base, rel
+    for rel in ("lenses/optics.py", "attacks/readers/lpdr.py", "benchmark/runner/tasks.py", "attacks/weights/w.safetensors"):
+        before = provenance.code_digest(tmp_path)
+        (tmp_path / rel).write_text("changed")
+        assert provenance.code_digest(tmp_path) != before, rel
+    (tmp_path / "benchmark/results/new.py").write_text("x")  # a new source file counts too
+    assert provenance.code_digest(tmp_path) != before
+    assert len(provenance.code_version()) == 16
