@@ -18,8 +18,12 @@ before any attacker imports them.
 import common.offline  # noqa: F401
 
 from attacks.base import (
+    BUDGET_PROFILES,
     Attack,
+    AttackBudget,
     FitContext,
+    FitCurve,
+    FitReport,
     LensLike,
     MissingRequirementError,
     PlateRead,
@@ -38,7 +42,11 @@ from attacks.registry import (
 )
 
 __all__ = [
+    "BUDGET_PROFILES",
     "Attack",
+    "AttackBudget",
+    "FitCurve",
+    "FitReport",
     "DuplicatePluginError",
     "FitContext",
     "LensLike",

@@ -5,6 +5,10 @@ declares what the adversary is assumed to have (``threat_model``) and which ``Fi
 fields it needs (``requires``); ``fit`` refuses to start when one of them is missing, so a
 mismatch between an attacker and a benchmark configuration fails before any work is done.
 The runner, not the attacker, computes metrics, so every attacker is scored the same way.
+
+This file is the whole contract: what an attacker may receive is a typed field of ``FitContext``
+(its budget an ``AttackBudget``), what its fit says of itself comes back as a ``FitReport``, and a
+reader's per-stage timings are its ``stage_seconds``.
 """
 
 from __future__ import annotations
@@ -18,11 +22,18 @@ from pathlib import Path
 from typing import Any, ClassVar, Protocol
 
 from torch import Tensor
+from torch.nn import Module
+
+from common.plate_render import PLATE_FORMAT
 
 __all__ = [
+    "AttackBudget",
     "ArtifactStore",
     "Attack",
+    "BUDGET_PROFILES",
     "FitContext",
+    "FitCurve",
+    "FitReport",
     "LensLike",
     "MissingRequirementError",
     "PlateRead",
@@ -86,12 +97,61 @@ class ArtifactStore(Protocol):
         ...
 
 
-@dataclasses.dataclass
-class FitContext:
-    """Everything an attacker may use to prepare itself; any field may be None.
+BUDGET_PROFILES = ("tiny", "smoke", "quick", "paper")
+"""The budgets an attacker may be given, smallest first: ``tiny`` (a contract test: any fit in well under a
+second) and the benchmark's three profiles."""
+
+
+@dataclasses.dataclass(frozen=True)
+class AttackBudget:
+    """How much an attacker may spend preparing itself: the run's profile and the size of a trained restorer.
 
     Attributes:
-        lens: The camera under attack (``LensLike``), or None when the threat model hides it.
+        profile: One of ``BUDGET_PROFILES``; a trained attacker sizes what the fields below do not say
+            by it (the learned reader's fine-tune, say).
+        restorer_steps: Optimiser steps of a trained restorer.
+        nafnet_width, nafnet_enc_blocks, nafnet_middle_blocks, nafnet_dec_blocks: A trained NAFNet's
+            architecture (channels; blocks per encoder level, in the middle, per decoder level).
+        crop_px: Side of the square training crops, in pixels (even: keeps the Bayer phase).
+        batch_size: Training crops per step.
+        max_train_images: How many training images to draw from the TRAIN split.
+    """
+
+    profile: str = "tiny"
+    restorer_steps: int = 2
+    nafnet_width: int = 4
+    nafnet_enc_blocks: tuple[int, ...] = (1,)
+    nafnet_middle_blocks: int = 1
+    nafnet_dec_blocks: tuple[int, ...] = (1,)
+    crop_px: int = 32
+    batch_size: int = 2
+    max_train_images: int = 4
+
+    def __post_init__(self) -> None:
+        if self.profile not in BUDGET_PROFILES:
+            raise ValueError(f"AttackBudget.profile {self.profile!r} is not a budget; valid: {list(BUDGET_PROFILES)}")
+        counts = {"restorer_steps": self.restorer_steps, "nafnet_width": self.nafnet_width,
+                  "nafnet_middle_blocks": self.nafnet_middle_blocks, "crop_px": self.crop_px,
+                  "batch_size": self.batch_size, "max_train_images": self.max_train_images}
+        for name, value in counts.items():
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"AttackBudget.{name} must be an int >= 1, got {value!r}")
+        if self.crop_px % 2:
+            raise ValueError(f"AttackBudget.crop_px must be even (it keeps the Bayer phase), got {self.crop_px}")
+        for name in ("nafnet_enc_blocks", "nafnet_dec_blocks"):
+            blocks = getattr(self, name)
+            if not blocks or any(not isinstance(b, int) or b < 1 for b in blocks):
+                raise ValueError(f"AttackBudget.{name} must be a non-empty tuple of ints >= 1, got {blocks!r}")
+
+
+@dataclasses.dataclass
+class FitContext:
+    """Everything an attacker may use to prepare itself, as typed fields; an attacker names the
+    optional ones it cannot do without in ``requires``.
+
+    Attributes:
+        lens: The camera under attack (``LensLike``), or None when the threat model hides it (and for
+            the sharp scenes themselves).
         train_pairs: Callable returning a fresh iterable of ``(sensor, sharp)`` batches from the
             TRAIN split, each a tensor (B, 3, H, W) in [0, 1]; callable so it can be re-iterated.
         cache_dir: Directory where the attacker may keep files of its own.
@@ -99,8 +159,15 @@ class FitContext:
             nothing, train every time.
         device: Torch device string the attacker should run on, e.g. "cpu" or "cuda".
         seed: Seed for any randomness in fitting.
-        profile: The benchmark profile (smoke / quick / paper) for sizing training, if any.
-        extras: Free-form options for attacker-specific inputs.
+        budget: How much fitting may cost (``AttackBudget``); the default is the ``tiny`` budget.
+        segmenter: A segmentation network as a callable, images (B, 3, H, W) in [0, 1] -> Cityscapes
+            train ids (B, H, W): the lens's own utility network, for attackers that find vehicles
+            with it (``lpdr``); None when the run has none.
+        plate_format: The format of the scenes' plate strings, one character per slot ("L" a letter,
+            "D" a digit; ``common.plate_render``).
+        adversary: The deblurring network co-designed with the lens (sensor (B, 3, H, W) -> scene
+            estimate, a ``torch.nn.Module``), under the training-adversary threat model; None for a
+            lens designed without one.
     """
 
     lens: LensLike | None = None
@@ -109,8 +176,51 @@ class FitContext:
     artifacts: ArtifactStore | None = None
     device: str = "cpu"
     seed: int = 0
-    profile: object | None = None
-    extras: dict[str, Any] = dataclasses.field(default_factory=dict)
+    budget: AttackBudget = dataclasses.field(default_factory=AttackBudget)
+    segmenter: Callable[[Tensor], Tensor] | None = None
+    plate_format: str = PLATE_FORMAT
+    adversary: Module | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class FitCurve:
+    """A trained attacker's held-out score against its training step.
+
+    Attributes:
+        steps: Optimiser steps at which it was evaluated, increasing.
+        scores: The held-out score at each step (higher is better; ``metric`` says what it is).
+        metric: What ``scores`` measure, e.g. "held-out plate accuracy".
+        stopped: Why the fit ended: "flattened" (the score stopped improving) or "budget" (it ran out of steps).
+        kept_step: The step whose weights the fit kept.
+    """
+
+    steps: tuple[int, ...]
+    scores: tuple[float, ...]
+    metric: str
+    stopped: str
+    kept_step: int
+
+    def __post_init__(self) -> None:
+        if len(self.steps) != len(self.scores):
+            raise ValueError(f"FitCurve: {len(self.steps)} steps but {len(self.scores)} scores")
+        if self.stopped not in ("flattened", "budget"):
+            raise ValueError(f"FitCurve.stopped must be 'flattened' or 'budget', got {self.stopped!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class FitReport:
+    """What ``Attack.fit`` says of itself; the runner writes it into the attacker's rows.
+
+    Attributes:
+        curve: The held-out curve of a trained attacker; None for one that trains nothing (or keeps none).
+        still_rising: Whether the fit stopped while its held-out score was still improving (a privacy
+            figure from it then overstates privacy); None when the attacker does not train.
+        stage_seconds: Wall seconds per named stage of the fit (e.g. {"pretrain": 12.0, "fine-tune": 80.0}).
+    """
+
+    curve: FitCurve | None = None
+    still_rising: bool | None = None
+    stage_seconds: Mapping[str, float] = dataclasses.field(default_factory=dict)
 
 
 _CONTEXT_FIELDS = frozenset(f.name for f in dataclasses.fields(FitContext))
@@ -209,10 +319,13 @@ class Attack(ABC):
         fixed lens), or None when it applies. The runner skips it with this message."""
         return None
 
-    def fit(self, ctx: FitContext) -> None:
-        """Prepare the attacker (measure, train, load weights). The default only checks
-        ``requires``; overrides get that check automatically before their body runs."""
+    def fit(self, ctx: FitContext) -> FitReport:
+        """Prepare the attacker (measure, train, load weights) and say how it went (``FitReport``).
+
+        The default only checks ``requires``. Overrides get that check automatically before their body
+        runs, and an override that returns nothing reports an empty ``FitReport()``."""
         self.check_requirements(ctx)
+        return FitReport()
 
     def describe(self) -> dict[str, Any]:
         """JSON-serializable configuration of this attacker, for caching and provenance.
@@ -226,12 +339,18 @@ class Attack(ABC):
 
 
 def _checking_requirements(
-    fit: Callable[[Attack, FitContext], None],
-) -> Callable[[Attack, FitContext], None]:
+    fit: Callable[[Attack, FitContext], FitReport | None],
+) -> Callable[[Attack, FitContext], FitReport]:
     @functools.wraps(fit)
-    def checked_fit(self: Attack, ctx: FitContext) -> None:
+    def checked_fit(self: Attack, ctx: FitContext) -> FitReport:
         self.check_requirements(ctx)
-        fit(self, ctx)
+        report = fit(self, ctx)
+        if report is None:
+            return FitReport()
+        if not isinstance(report, FitReport):
+            raise TypeError(f"{type(self).__qualname__}.fit returned {type(report).__name__}; "
+                            "it returns an attacks.FitReport (or None for an empty one)")
+        return report
 
     return checked_fit
 
@@ -252,7 +371,20 @@ class Restorer(Attack):
 
 
 class Reader(Attack):
-    """An attacker that reads licence plates from images."""
+    """An attacker that reads licence plates from images.
+
+    ``stage_seconds`` holds the cumulative wall seconds a reader spent in each named stage of its reads
+    (``lpdr``: vehicles, plates, ocr); the runner reports its growth over a chain as
+    ``<stage>_s_per_image``. A reader without stages leaves it empty.
+    """
+
+    @property
+    def stage_seconds(self) -> dict[str, float]:
+        return self.__dict__.setdefault("_stage_seconds", {})
+
+    @stage_seconds.setter
+    def stage_seconds(self, seconds: dict[str, float]) -> None:
+        self.__dict__["_stage_seconds"] = seconds
 
     @abstractmethod
     def read(self, images: Tensor, hints: ReadHints | None = None) -> list[list[PlateRead]]:

@@ -18,7 +18,14 @@ class Lens(torch.nn.Module):
     `coefficients_um` (6,) holds the Noll Zernike coefficients of the mask thickness in um of
     glass; it is a trainable parameter when the spec declares bounds. Grid sizes are fixed at
     construction (from the bounds for trainable masks), so nothing changes shape while training.
+
+    ``utility_net``, ``adversary`` and ``training_record``: what co-design trained with this lens (None
+    for a fixed lens).
     """
+
+    utility_net: torch.nn.Module | None
+    adversary: torch.nn.Module | None
+    training_record: dict | None
 
     def __init__(self, spec: LensSpec, geometry: Geometry | None = None):
         super().__init__()

@@ -74,7 +74,7 @@ class IdealObserverReader(Reader):
         return None
 
     def fit(self, ctx: FitContext) -> None:
-        """Take the lens's PSF, gain and sensor constants; the plate format from ctx.extras['plate_format']."""
+        """Take the lens's PSF, gain and sensor constants, and the scenes' plate format (``ctx.plate_format``)."""
         lens = ctx.lens
         if lens is None:  # skip_reason says so; fit may be called without asking it
             raise ValueError(self.skip_reason(ctx))
@@ -82,7 +82,7 @@ class IdealObserverReader(Reader):
         with torch.no_grad():
             psf = lens.psf().detach().to(torch.float64).cpu()
             gain = lens.gain().detach().to(torch.float64).cpu()
-        self.plate_format = ctx.extras.get("plate_format", PLATE_FORMAT)
+        self.plate_format = ctx.plate_format
         format_alphabets(self.plate_format)  # validates it
         levels = 2**sensor.adc_bits - 1
         self._camera = {"psf": psf, "electrons_per_unit": gain * sensor.full_well_e,

@@ -14,18 +14,19 @@ use of it).
 Fitting: the network starts from weights pre-trained on sharp plates (clean renders with white
 noise), shipped in the package (``attacks/weights/learned-reader-sharp-s0.*``, made by ``python -m
 benchmark pretrain-attacker learned-reader``), and is fine-tuned on the lens until its held-out
-accuracy flattens (``attacks.training.plate_reader_training``; the curve is kept with the weights and in
-``describe()``, a fit stopped while still rising is flagged). Weights are cached per (lens, plate
+accuracy flattens (``attacks.training.plate_reader_training``; the curve is kept with the weights and
+comes back in the ``FitReport`` of ``fit``, which says whether it stopped while still rising). Weights are cached per (lens, plate
 format, budget, pre-trained weights, fit seed: 0 by default, so a fixed lens is fitted once for every
 run seed). Without shipped weights for the plate format (another
-``--plate-format``), it pre-trains here first: the full pre-training for quick and paper, the
-profile's own tiny budget for smoke.
+``--plate-format``), it pre-trains here first: the full pre-training for the quick and paper budgets, the
+budget's own small one for smoke and tiny.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import time
 from typing import Any, ClassVar
 
 import torch
@@ -33,7 +34,7 @@ from safetensors.torch import load as load_safetensors
 from safetensors.torch import save as save_safetensors
 from torch import Tensor
 
-from attacks.base import FitContext, PlateRead, ReadHints, Reader, ThreatModel
+from attacks.base import FitContext, FitCurve as ReportedCurve, FitReport, PlateRead, ReadHints, Reader, ThreatModel
 from attacks.networks.plate_cnn import PlateCNN
 from attacks.training.plate_reader_training import Camera, FitCurve, ReaderBudget, held_out_set, train_reader
 from common.plate_render import PLATE_FORMAT, format_alphabets
@@ -51,8 +52,8 @@ PRETRAIN_BUDGET = ReaderBudget(max_steps=6000, batch_size=64, lr=3e-3, widths_px
                                eval_plates=64, patience=4)
 """Pre-training on sharp plates (``python -m benchmark pretrain-attacker learned-reader``)."""
 
-BUDGETS: dict[str | None, ReaderBudget] = {
-    None: ReaderBudget(max_steps=2, batch_size=4, lr=1e-3, widths_px=(24.0, 64.0), eval_every=1, eval_plates=2,
+BUDGETS: dict[str, ReaderBudget] = {
+    "tiny": ReaderBudget(max_steps=2, batch_size=4, lr=1e-3, widths_px=(24.0, 64.0), eval_every=1, eval_plates=2,
                        patience=1),
     "smoke": ReaderBudget(max_steps=20, batch_size=16, lr=1e-3, widths_px=(8.0, 200.0), eval_every=10,
                           eval_plates=8, patience=2, bands_per_batch=4),
@@ -61,7 +62,7 @@ BUDGETS: dict[str | None, ReaderBudget] = {
     "paper": ReaderBudget(max_steps=6000, batch_size=64, lr=1e-3, widths_px=(8.0, 200.0), eval_every=200,
                           eval_plates=128, patience=5, bands_per_batch=4),
 }
-"""Fine-tuning budget per profile name (None: no profile, e.g. the contract test)."""
+"""Fine-tuning budget per ``AttackBudget.profile`` (one for each of ``attacks.base.BUDGET_PROFILES``)."""
 
 VIEWS: tuple[tuple[float, float, float], ...] = (
     (0.0, 0.0, 1.0), (0.02, 0.0, 1.0), (-0.02, 0.0, 1.0), (0.0, 0.0, 1.04), (0.0, 0.0, 0.96),
@@ -146,25 +147,27 @@ class LearnedReader(Reader):
             return lens(x.to(device), generator=generator if device == "cpu" else None).cpu()
         return camera
 
-    def fit(self, ctx: FitContext) -> None:
+    def fit(self, ctx: FitContext) -> FitReport:
         """Fine-tune (or load from ``ctx.artifacts``) the reader on plates through ``ctx.lens``; with no
         lens (the sharp scenes) read with the start, pre-trained on sharp plates, as it is."""
         reason = self.skip_reason(ctx)
         if reason is not None:
             raise ValueError(reason)
-        self.plate_format = str(ctx.extras.get("plate_format", PLATE_FORMAT))
+        self.plate_format = ctx.plate_format
         lens: Any = ctx.lens
-        profile = getattr(ctx.profile, "name", None)
-        self.budget = BUDGETS.get(profile, BUDGETS["quick"])
-        # Without shipped weights a smoke run (or no profile) starts from its own tiny pre-training:
-        # the full one took 25 minutes on one of 2 loaded cores.
+        profile = ctx.budget.profile
+        self.budget = BUDGETS[profile]
+        # Without shipped weights a smoke or tiny budget starts from its own small pre-training: the full
+        # one takes tens of minutes on 2 cores.
         seed = ctx.seed if self.fit_seed is None else self.fit_seed
-        pretrain_budget = self.budget if profile in (None, "smoke") else PRETRAIN_BUDGET
+        pretrain_budget = self.budget if profile in ("tiny", "smoke") else PRETRAIN_BUDGET
+        t0 = time.perf_counter()
         net, start = self._start(seed, pretrain_budget)
+        seconds = {"start": time.perf_counter() - t0}
         if lens is None:  # the sharp scenes themselves: the start was trained on sharp plates, read with it
             self.spread_px, self.budget, self.trained = 0.0, None, False
             self.net = net.to(ctx.device).eval()
-            return
+            return FitReport(stage_seconds=seconds)
         psf = lens.psf().detach().cpu()
         self.spread_px, half = psf_radius_px(psf), psf.shape[-1] // 2
         key = {"attack": self.name, "budget": self.budget.to_dict(), "lens": lens_key(lens), "format": self.plate_format,
@@ -189,7 +192,19 @@ class LearnedReader(Reader):
             self.trained = True
             if ctx.artifacts is not None:
                 ctx.artifacts.save(self.name, key, pack_weights(net, self.curve))
+        seconds["fine-tune" if self.trained else "load"] = time.perf_counter() - t0 - seconds["start"]
         self.net = net.to(ctx.device).eval()
+        return self.report(seconds)
+
+    def report(self, stage_seconds: dict[str, float] | None = None) -> FitReport:
+        """The ``FitReport`` of the last fit: its held-out curve (mean accuracy over the width bins) and
+        whether it stopped while still rising; empty before a fit or for a fit loaded without a curve."""
+        seconds = {} if stage_seconds is None else stage_seconds
+        if self.curve is None or not self.curve.steps:
+            return FitReport(stage_seconds=seconds)
+        curve = ReportedCurve(tuple(self.curve.steps), tuple(self.curve.accuracy), "held-out plate accuracy",
+                              self.curve.stopped, self.curve.steps[self.curve.kept])
+        return FitReport(curve=curve, still_rising=self.curve.still_rising, stage_seconds=seconds)
 
     def _start(self, seed: int, pretrain_budget: ReaderBudget) -> tuple[PlateCNN, dict[str, Any]]:
         """The network to fine-tune and what it started from: the shipped pre-trained weights for the
@@ -237,7 +252,7 @@ class LearnedReader(Reader):
         return reads
 
     def describe(self) -> dict[str, Any]:
-        """Budget, plate format, PSF spread, where the start weights came from and the fit's curve."""
+        """Budget, plate format, PSF spread and where the start weights came from."""
         described = {**super().describe(), "fit_seed": self.fit_seed, "plate_format": self.plate_format, "spread_px": round(self.spread_px, 3),
                      "budget": None if self.budget is None else self.budget.to_dict(), "trained": self.trained,
                      "recipe": "per-slot CE, label smoothing 0.05, AdamW warm-up then cosine; stops when held-out accuracy flattens"}
@@ -245,9 +260,6 @@ class LearnedReader(Reader):
             described["shipped_weights"] = self.shipped.describe()
         if self.shipped_fit is not None:
             described["shipped_fit"] = self.shipped_fit.describe()
-        if self.curve is not None:
-            described["fit_curve"] = self.curve.to_dict()
-            described["fit_still_rising"] = self.curve.still_rising
         return described
 
 

@@ -284,9 +284,9 @@ class Lpdr(PlateReaderBase):
         return labels.to(torch.int64)
 
     def skip_reason(self, ctx: FitContext) -> str | None:
-        if ctx.extras.get("segmenter") is None:
+        if ctx.segmenter is None:
             return ("lpdr finds vehicles with a segmentation network, and this context has none "
-                    "(FitContext.extras['segmenter'] is None); lpdr-oracle reads with ground-truth vehicles")
+                    "(FitContext.segmenter is None); lpdr-oracle reads with ground-truth vehicles")
         return None
 
     def _vehicles(self, images: Tensor, hints: ReadHints | None) -> list[list[Box]]:

@@ -101,7 +101,7 @@ class NafnetGeneric(Restorer):
             if ctx.train_pairs is None:
                 raise ValueError(f"{self.name}: without checkpoint=PATH it trains, and needs "
                                  "FitContext.train_pairs (sharp TRAIN crops)")
-            budget = RestorerBudget.from_profile(ctx.profile)
+            budget = RestorerBudget.from_budget(ctx.budget)
             _, sharp = collect_pairs(ctx.train_pairs, budget.max_train_images)
             key = self._key(budget, sharp, ctx.seed)
 
@@ -119,7 +119,7 @@ class NafnetGeneric(Restorer):
         """The configuration its trained weights are cached (and shipped) under: budget, training crops, seed."""
         if ctx.train_pairs is None:
             raise ValueError(f"{self.name}: the cache key needs FitContext.train_pairs (sharp TRAIN crops)")
-        budget = RestorerBudget.from_profile(ctx.profile)
+        budget = RestorerBudget.from_budget(ctx.budget)
         _, sharp = collect_pairs(ctx.train_pairs, budget.max_train_images)
         return self._key(budget, sharp, ctx.seed)
 

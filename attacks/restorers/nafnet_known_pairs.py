@@ -70,7 +70,7 @@ class NafnetKnownPairs(Restorer):
     def fit(self, ctx: FitContext) -> None:
         """Train (or load from ``ctx.artifacts``) a NAFNet on ``ctx.train_pairs``."""
         assert ctx.lens is not None and ctx.train_pairs is not None  # checked by `requires`
-        budget = RestorerBudget.from_profile(ctx.profile)
+        budget = RestorerBudget.from_budget(ctx.budget)
         sensor, sharp = collect_pairs(ctx.train_pairs, budget.max_train_images)
         key = self._key(budget, ctx, sensor, sharp)
 
@@ -87,7 +87,7 @@ class NafnetKnownPairs(Restorer):
         """The configuration its weights are cached (and shipped) under: budget, lens, training pairs, seed."""
         if ctx.lens is None or ctx.train_pairs is None:
             raise ValueError(f"{self.name}: the cache key needs FitContext.lens and FitContext.train_pairs")
-        budget = RestorerBudget.from_profile(ctx.profile)
+        budget = RestorerBudget.from_budget(ctx.budget)
         sensor, sharp = collect_pairs(ctx.train_pairs, budget.max_train_images)
         return self._key(budget, ctx, sensor, sharp)
 

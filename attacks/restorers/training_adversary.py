@@ -21,7 +21,7 @@ __all__ = ["TrainingAdversary"]
 
 
 class TrainingAdversary(Restorer):
-    """Restores with ``ctx.lens.adversary`` (a frozen copy), clamped to [0, 1].
+    """Restores with ``ctx.adversary`` (a frozen copy), clamped to [0, 1].
 
     Args:
         backend: Inference backend: "onnx", "auto" or "torch" (``attacks.backends.onnx_runtime``).
@@ -35,7 +35,7 @@ class TrainingAdversary(Restorer):
 
     name: ClassVar[str] = "training-adversary"
     threat_model: ClassVar[ThreatModel] = ThreatModel.TRAINING_ADVERSARY
-    requires: ClassVar[frozenset[str]] = frozenset({"lens"})
+    requires: ClassVar[frozenset[str]] = frozenset({"adversary"})
 
     def __init__(self, backend: str = "onnx") -> None:
         self.backend = check_backend(backend)
@@ -44,18 +44,16 @@ class TrainingAdversary(Restorer):
 
     def skip_reason(self, ctx: FitContext) -> str | None:
         """A message when the lens has no co-design adversary (a fixed lens), else None."""
-        if getattr(ctx.lens, "adversary", None) is None:
+        if ctx.adversary is None:
             name = getattr(getattr(ctx.lens, "spec", None), "name", "this lens")
-            return f"{name} was not co-designed with a deblurring adversary (no lens.adversary)"
+            return f"{name} was not co-designed with a deblurring adversary (FitContext.adversary is None)"
         return None
 
     def fit(self, ctx: FitContext) -> None:
-        """Take a frozen copy of ``ctx.lens.adversary``; a later step of co-design cannot
-        change the attacker being scored."""
-        reason = self.skip_reason(ctx)
-        if reason is not None:
-            raise ValueError(f"{self.name}: {reason}; the runner skips it for such lenses")
-        adversary: nn.Module = ctx.lens.adversary  # type: ignore[union-attr]
+        """Take a frozen copy of ``ctx.adversary``; a later step of co-design cannot change the
+        attacker being scored."""
+        adversary: nn.Module | None = ctx.adversary
+        assert adversary is not None  # checked by `requires`
         network = copy.deepcopy(adversary).requires_grad_(False).eval()
         self._network = type(adversary).__name__
         self.engine = InferenceEngine(network, self.backend, fallback=True)

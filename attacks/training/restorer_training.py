@@ -27,7 +27,7 @@ from safetensors.torch import save as save_safetensors
 from torch import Tensor, nn
 
 from common import crops
-from attacks.base import ArtifactStore
+from attacks.base import ArtifactStore, AttackBudget
 from attacks.networks.nafnet import NAFNet
 from attacks.training.shipped_weights import Shipped, data_summary, find_shipped
 
@@ -55,7 +55,7 @@ _GRAD_CLIP = 1.0
 
 @dataclasses.dataclass(frozen=True)
 class RestorerBudget:
-    """Size and step budget of a trained restorer, from a benchmark profile.
+    """Size and step budget of a trained restorer, from the fit context's ``AttackBudget``.
 
     Attributes:
         steps: Optimiser steps.
@@ -75,17 +75,11 @@ class RestorerBudget:
     max_train_images: int
 
     @classmethod
-    def from_profile(cls, profile: Any | None) -> RestorerBudget:
-        """The profile's restorer fields; None (no profile, e.g. the contract test) gives a
-        tiny budget that fits in well under a second."""
-        if profile is None:
-            return cls(steps=2, width=4, enc_blocks=(1,), middle_blocks=1, dec_blocks=(1,),
-                       crop_px=32, batch_size=2, max_train_images=4)
-        crop = min(profile.train_crop)
-        return cls(steps=profile.restorer_steps, width=profile.nafnet_width,
-                   enc_blocks=tuple(profile.nafnet_enc_blocks), middle_blocks=profile.nafnet_middle_blocks,
-                   dec_blocks=tuple(profile.nafnet_dec_blocks), crop_px=crop - crop % 2,
-                   batch_size=profile.batch_size, max_train_images=profile.n_train)
+    def from_budget(cls, budget: AttackBudget) -> RestorerBudget:
+        """The restorer fields of an attack budget (the default ``AttackBudget()`` fits in well under a second)."""
+        return cls(steps=budget.restorer_steps, width=budget.nafnet_width, enc_blocks=tuple(budget.nafnet_enc_blocks),
+                   middle_blocks=budget.nafnet_middle_blocks, dec_blocks=tuple(budget.nafnet_dec_blocks),
+                   crop_px=budget.crop_px, batch_size=budget.batch_size, max_train_images=budget.max_train_images)
 
     def nafnet_arch(self) -> dict[str, Any]:
         """Keyword arguments of ``NAFNet`` for this budget."""

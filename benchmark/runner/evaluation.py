@@ -157,11 +157,11 @@ def read_plates(reader: attacks.Reader, images: torch.Tensor | Sequence[torch.Te
     score it against the scenes' plates (one scene record per image).
 
     Returns the per-plate outcomes, the timing (``images_per_s``, and ``<stage>_s_per_image`` for
-    readers that keep ``stage_seconds``, like lpdr), n_images and the reads per image.
+    readers whose ``stage_seconds`` grew, like lpdr), n_images and the reads per image.
     """
     outcomes: list[PlateOutcome] = []
     all_reads: list[list[attacks.PlateRead]] = []
-    stages_before = dict(getattr(reader, "stage_seconds", {}))
+    stages_before = dict(reader.stage_seconds)
     t0 = time.perf_counter()
     chunks: list[list[Scene]] = []
 
@@ -190,7 +190,7 @@ def read_plates(reader: attacks.Reader, images: torch.Tensor | Sequence[torch.Te
         all_reads.extend(reads)
     n_images = len(images)
     timing = {"images_per_s": n_images / (time.perf_counter() - t0), "n_images": float(n_images)}
-    for stage, seconds in getattr(reader, "stage_seconds", {}).items():
+    for stage, seconds in reader.stage_seconds.items():
         timing[f"{stage}_s_per_image"] = (seconds - stages_before.get(stage, 0.0)) / n_images
     return outcomes, timing, all_reads
 
@@ -329,7 +329,7 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
     del images
     metrics.update({"fit_s": float(fit_s), "images_per_s": target.sharp.shape[0] / run_s})
     row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
-                   threat_model=attacker.threat_model.value, settings=settings)
+                   threat_model=attacker.threat_model.value, settings=settings, notes=fit_notes(error))
     scene_intervals(row, per_image, seed=row.seed)
     row.set_units(scene_units(target.scenes, per_image))
     out.rows.append(row)
@@ -355,21 +355,18 @@ class ReadyReader:
     notes: dict[str, str] = field(default_factory=dict)  # what its fit says of itself (`fit_notes`)
 
 
-def fit_notes(described: object) -> dict[str, str]:
-    """The row notes a fitted attacker's describe() gives: ``FIT_STILL_RISING`` ("true" / "false")
-    when it says whether its fit stopped while its held-out score was still improving, and
-    ``fit_stopped`` ("flattened at step 1200, kept step 900") when it gives its fit curve (``steps``,
-    ``stopped``, ``best_step``): the settings hold the description made before the fit."""
-    if not isinstance(described, dict):
+def fit_notes(report: object) -> dict[str, str]:
+    """The row notes of an attacker's ``FitReport``: ``FIT_STILL_RISING`` ("true" / "false") when it says
+    whether its fit stopped while its held-out score was still improving, and ``fit_stopped`` ("flattened
+    at step 1200, kept step 900") when it has a curve. Anything but a FitReport gives none."""
+    if not isinstance(report, attacks.FitReport):
         return {}
     notes = {}
-    rising = described.get(FIT_STILL_RISING)
-    if isinstance(rising, bool):
-        notes[FIT_STILL_RISING] = "true" if rising else "false"
-    curve = described.get("fit_curve")
-    if isinstance(curve, dict) and curve.get("steps") and "stopped" in curve:
-        kept = curve.get("best_step", curve["steps"][-1])
-        notes["fit_stopped"] = f"{curve['stopped']} at step {curve['steps'][-1]}, kept step {kept}"
+    if isinstance(report.still_rising, bool):
+        notes[FIT_STILL_RISING] = "true" if report.still_rising else "false"
+    if report.curve is not None and report.curve.steps:
+        curve = report.curve
+        notes["fit_stopped"] = f"{curve.stopped} at step {curve.steps[-1]}, kept step {curve.kept_step}"
     return notes
 
 
@@ -391,9 +388,9 @@ def fit_readers(target: Target, readers: Sequence[attacks.Reader], cfg: RunConfi
         if isinstance(error, RowError):
             ready.append(ReadyReader(reader, error, described))
             continue
-        # The settings keep the description made before the fit; the fit's verdict on itself goes in the notes.
+        # The settings keep the description made before the fit; the fit's report on itself goes in the notes.
         after = describe(reader)
-        ready.append(ReadyReader(reader, after if isinstance(after, RowError) else None, described, fit_notes(after)))
+        ready.append(ReadyReader(reader, after if isinstance(after, RowError) else None, described, fit_notes(error)))
     return ready
 
 

@@ -6,7 +6,7 @@ that writes into its input (``s.zero_()``) would otherwise change the sensor ima
 attacker sees, and a reader that writes into a restorer's output would change what the next reader
 reads. What an attacker returns is checked and copied by the evaluation before it is kept, so the
 attacker cannot change it afterwards either. Each attacker also gets its own fit context: its own
-copy of the lens (an attacker may move its parameters) and of the extras dict.
+copy of the lens and of its co-design adversary (an attacker may move their parameters).
 """
 
 from __future__ import annotations
@@ -33,9 +33,11 @@ def private(batch: torch.Tensor, device: str) -> torch.Tensor:
 
 
 def own_context(ctx: attacks.FitContext) -> attacks.FitContext:
-    """A fit context for one attacker: its own lens copy and extras dict. Training pairs need no copy:
-    `train_pairs()` makes fresh tensors at every call (benchmark.runner.sensing.train_pairs_factory)."""
-    return dataclasses.replace(ctx, lens=copy.deepcopy(ctx.lens), extras=dict(ctx.extras))
+    """A fit context for one attacker: its own copy of the lens and the adversary (one deep copy, so the
+    copied lens still holds the copied adversary). Training pairs need no copy: `train_pairs()` makes
+    fresh tensors at every call (benchmark.runner.sensing.train_pairs_factory)."""
+    lens, adversary = copy.deepcopy((ctx.lens, ctx.adversary))
+    return dataclasses.replace(ctx, lens=lens, adversary=adversary)
 
 
 def attempt(attacker: str, stage: str, work: Callable[[], T], budget_s: float | None = None) -> T | RowError:

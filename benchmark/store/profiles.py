@@ -9,9 +9,13 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from benchmark.store.measured_costs import run_text
 from common.plugins import suggest
+
+if TYPE_CHECKING:
+    from attacks.base import AttackBudget
 
 
 @dataclass(frozen=True)
@@ -62,6 +66,19 @@ class Profile:
         d = dataclasses.asdict(self)
         d.pop("description")
         return d
+
+    def attack_budget(self) -> AttackBudget:
+        """What this profile lets an attacker spend on its fit (``attacks.AttackBudget``): the profile's
+        name and its trained-restorer fields, the training crop the smaller side of ``train_crop`` made
+        even (the Bayer phase)."""
+        from attacks.base import AttackBudget  # lazy: the CLI's parser imports profiles and no torch
+
+        crop = min(self.train_crop)
+        return AttackBudget(profile=self.name, restorer_steps=self.restorer_steps, nafnet_width=self.nafnet_width,
+                            nafnet_enc_blocks=tuple(self.nafnet_enc_blocks),
+                            nafnet_middle_blocks=self.nafnet_middle_blocks,
+                            nafnet_dec_blocks=tuple(self.nafnet_dec_blocks), crop_px=crop - crop % 2,
+                            batch_size=self.batch_size, max_train_images=self.n_train)
 
 
 def _measured(purpose: str, profile: str) -> str:

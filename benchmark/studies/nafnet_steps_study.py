@@ -68,7 +68,7 @@ def measure(profile: Profile, lens_name: str = "defocus", seed: int = 0,
         top, left = (sharp.shape[2] - eval_hw[0]) // 2, (sharp.shape[3] - eval_hw[1]) // 2
         sharp = sharp[:, :, top:top + eval_hw[0], left:left + eval_hw[1]]
         sensor = sensor[:, :, top:top + eval_hw[0], left:left + eval_hw[1]]
-    budget = RestorerBudget.from_profile(dataclasses.replace(profile, restorer_steps=steps))
+    budget = RestorerBudget.from_budget(dataclasses.replace(profile, restorer_steps=steps).attack_budget())
     t0 = time.perf_counter()
     train_sensor, train_sharp = collect_pairs(train_pairs_factory(lens, cfg, seed), budget.max_train_images)
     pairs_s = time.perf_counter() - t0

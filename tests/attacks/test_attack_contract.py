@@ -9,18 +9,34 @@ import pytest
 import torch
 
 import attacks
+from attacks.networks import RED10
 
 REGISTERED = sorted(attacks.available())
 
 
+def segment(images):
+    """A segmenter that calls everything a car (train id 13), for readers that find vehicles with one."""
+    return torch.full((images.shape[0], *images.shape[-2:]), 13, dtype=torch.long)
+
+
 @pytest.fixture
 def context(fake_lens, tmp_path):
+    """Every field of the typed context set, the budget the tiny default: what any attacker may ask for."""
     def pairs():
         g = torch.Generator().manual_seed(0)
         sharp = torch.rand(2, 3, 32, 32, generator=g)
         yield sharp * 0.5, sharp
 
-    return attacks.FitContext(lens=fake_lens, train_pairs=pairs, cache_dir=tmp_path, device="cpu", seed=0)
+    return attacks.FitContext(lens=fake_lens, train_pairs=pairs, cache_dir=tmp_path, device="cpu", seed=0,
+                              segmenter=segment, adversary=RED10(width=4))
+
+
+def test_the_context_is_typed_fields_only():
+    fields = {f.name: f.type for f in dataclasses.fields(attacks.FitContext)}
+    assert set(fields) == {"lens", "train_pairs", "cache_dir", "artifacts", "device", "seed", "budget", "segmenter",
+                           "plate_format", "adversary"}
+    assert not any(t in ("object", "Any", "dict[str, Any]") for t in fields.values()), fields
+    assert attacks.FitContext().budget == attacks.AttackBudget(profile="tiny")
 
 
 @pytest.mark.parametrize("name", REGISTERED)
@@ -32,7 +48,12 @@ def test_attack_contract(name, context):
     reason = attack.skip_reason(context)
     assert reason is None or (isinstance(reason, str) and reason)
     if reason is None:
-        attack.fit(context)
+        report = attack.fit(context)
+        assert isinstance(report, attacks.FitReport)
+        assert report.still_rising in (None, True, False)
+        assert all(isinstance(k, str) and v >= 0 for k, v in report.stage_seconds.items())
+        if report.curve is not None:
+            assert len(report.curve.steps) == len(report.curve.scores) and report.curve.kept_step in report.curve.steps
     description = attack.describe()
     assert description["name"] == name
     json.dumps(description)  # provenance must be serializable
@@ -60,11 +81,6 @@ def test_reader_contract(name, context):
     attack = attacks.load(name)
     if not isinstance(attack, attacks.Reader):
         pytest.skip(f"{name} is not a reader")
-    # Readers that find vehicles by segmentation get one that calls everything a car (train id 13).
-    def segment(images):
-        return torch.full((images.shape[0], *images.shape[-2:]), 13, dtype=torch.long)
-
-    context = dataclasses.replace(context, extras={"segmenter": segment})
     if attack.skip_reason(context):
         pytest.skip(f"{name} does not apply to the fake lens: {attack.skip_reason(context)}")
     attack.fit(context)

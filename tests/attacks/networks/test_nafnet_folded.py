@@ -51,7 +51,7 @@ def test_folded_block_needs_no_slice_and_no_norm_affine():
 
 
 def test_folded_quick_nafnet_through_onnx_runtime_matches_the_torch_original():
-    model = _randomized(RestorerBudget.from_profile(PROFILES["quick"]).build_nafnet(), seed=3)
+    model = _randomized(RestorerBudget.from_budget(PROFILES["quick"].attack_budget()).build_nafnet(), seed=3)
     x = torch.rand(1, 3, 64, 96, generator=torch.Generator().manual_seed(2))
     with torch.no_grad():
         want = model(x)

@@ -160,7 +160,7 @@ def test_fit_is_deterministic_per_seed_cached_and_reads_given_boxes():
     fits = []
     for seed in (0, 0, 1):
         reader = LearnedReader(fit_seed=None)  # one fit per run seed
-        reader.fit(attacks.FitContext(lens=lens, device="cpu", seed=seed, profile=None, artifacts=None))
+        reader.fit(attacks.FitContext(lens=lens, device="cpu", seed=seed, artifacts=None))
         fits.append(reader)
     state = [r.net.state_dict() for r in fits]
     assert all(torch.equal(state[0][k], state[1][k]) for k in state[0])
@@ -168,18 +168,19 @@ def test_fit_is_deterministic_per_seed_cached_and_reads_given_boxes():
     # The default: the fit depends on the lens alone, so every run seed of a fixed lens finds seed 0's fit.
     shared = MemoryStore()
     first_seed = attacks.load("learned-reader")
-    first_seed.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, profile=None, artifacts=shared))
+    first_seed.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, artifacts=shared))
     other_seed = attacks.load("learned-reader")
-    other_seed.fit(attacks.FitContext(lens=lens, device="cpu", seed=2, profile=None, artifacts=shared))
+    other_seed.fit(attacks.FitContext(lens=lens, device="cpu", seed=2, artifacts=shared))
     assert first_seed.trained and other_seed.trained is False and first_seed.fit_key == other_seed.fit_key
     assert all(torch.equal(a, b) for a, b in zip(first_seed.net.state_dict().values(), state[0].values()))
     first = attacks.load("learned-reader")
-    first.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, profile=None, artifacts=store))
+    first.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, artifacts=store))
     again = attacks.load("learned-reader")
-    again.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, profile=None, artifacts=store))
+    report = again.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, artifacts=store))
     assert first.trained and again.trained is False and again.curve == first.curve
-    described = again.describe()
-    assert described["fit_curve"]["steps"] and isinstance(described["fit_still_rising"], bool)
+    # A fit loaded from the cache reports the curve it was made with, and that it loaded.
+    assert report.curve is not None and list(report.curve.steps) == first.curve.steps
+    assert isinstance(report.still_rising, bool) and set(report.stage_seconds) == {"start", "load"}
     images = torch.rand(2, 3, 64, 128, generator=torch.Generator().manual_seed(3))
     boxes = [[(10.0, 10.0, 74.0, 24.0), (0.0, 0.0, 5.0, 2.0)], []]  # the 5 px box is below min_width_px
     reads = again.read(images, attacks.ReadHints(plate_boxes=boxes))
@@ -200,10 +201,10 @@ def test_with_no_lens_it_reads_with_its_sharp_start(shipped_net):
     net, _, _ = shipped_net
     reader = attacks.load("learned-reader")
     assert reader.skip_reason(attacks.FitContext(lens=None)) is None
-    reader.fit(attacks.FitContext(lens=None, device="cpu", seed=0, profile=None, artifacts=MemoryStore()))
+    report = reader.fit(attacks.FitContext(lens=None, device="cpu", seed=0, artifacts=MemoryStore()))
     assert reader.trained is False and reader.spread_px == 0.0 and reader.curve is None
     assert all(torch.equal(a, b) for a, b in zip(reader.net.state_dict().values(), net.state_dict().values()))
-    assert "fit_still_rising" not in reader.describe()
+    assert report.curve is None and report.still_rising is None
 
 
 @pytest.mark.slow
@@ -267,14 +268,14 @@ def test_cached_weights_that_do_not_fit_are_refitted_from_a_clean_start():
     lens = lenses.load("ideal")
     store = MemoryStore()
     first = attacks.load("learned-reader")
-    first.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, profile=None, artifacts=store))
+    first.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, artifacts=store))
     (name,) = store.items
     state = {k: torch.full_like(v, 0.5) for k, v in first.net.state_dict().items()}
     last = sorted(state)[-1]
     state[last] = torch.zeros(3, 1)
     store.items[name] = save_safetensors(state)
     again = attacks.load("learned-reader")
-    again.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, profile=None, artifacts=store))
+    again.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, artifacts=store))
     assert again.trained and again.shipped_fit is None
     assert all(torch.equal(a, b) for a, b in zip(again.net.state_dict().values(), first.net.state_dict().values()))
 
@@ -282,10 +283,13 @@ def test_cached_weights_that_do_not_fit_are_refitted_from_a_clean_start():
 def test_the_row_notes_say_where_the_fit_stopped_and_which_step_it_kept():
     from benchmark.runner.evaluation import fit_notes
     reader = attacks.load("learned-reader")
-    reader.fit(attacks.FitContext(lens=lenses.load("ideal"), device="cpu", seed=0, profile=None,
-                                  artifacts=MemoryStore()))
+    report = reader.fit(attacks.FitContext(lens=lenses.load("ideal"), device="cpu", seed=0,
+                                           artifacts=MemoryStore()))
     curve = reader.curve
-    notes = fit_notes(reader.describe())
+    notes = fit_notes(report)
     assert notes["fit_stopped"] == f"{curve.stopped} at step {curve.steps[-1]}, kept step {curve.best_step}"
-    assert notes["fit_still_rising"] in ("true", "false")
-    assert fit_notes({"fit_curve": {"steps": [], "stopped": "budget"}}) == {} and fit_notes(None) == {}
+    assert notes["fit_still_rising"] == ("true" if curve.still_rising else "false")
+    assert report.stage_seconds["fine-tune"] > 0
+    # A report without a curve or a verdict gives no notes; nor does anything that is not a report.
+    assert fit_notes(attacks.FitReport()) == {} and fit_notes(None) == {}
+    assert fit_notes({"fit_curve": {"steps": [1], "stopped": "budget"}, "fit_still_rising": True}) == {}

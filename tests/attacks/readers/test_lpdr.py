@@ -129,7 +129,7 @@ def test_segmentation_reader_uses_the_segment_hint(large_plate_scenes):
 def test_skip_reason_and_missing_hints():
     lpdr, oracle = Lpdr(), LpdrOracle()
     assert "segmenter" in lpdr.skip_reason(attacks.FitContext())
-    assert lpdr.skip_reason(attacks.FitContext(extras={"segmenter": object()})) is None
+    assert lpdr.skip_reason(attacks.FitContext(segmenter=lambda images: images)) is None
     assert oracle.skip_reason(attacks.FitContext()) is None
     images = torch.zeros(1, 3, 32, 64)
     with pytest.raises(ValueError, match="segment"):

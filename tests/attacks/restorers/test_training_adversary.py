@@ -19,7 +19,7 @@ def codesigned_lens(fake_lens):
 @pytest.mark.parametrize("backend", ["torch", "onnx"])
 def test_restores_with_the_lens_adversary(codesigned_lens, backend):
     attack = attacks.load("training-adversary", backend=backend)
-    ctx = attacks.FitContext(lens=codesigned_lens)
+    ctx = attacks.FitContext(lens=codesigned_lens, adversary=codesigned_lens.adversary)
     assert attack.skip_reason(ctx) is None
     attack.fit(ctx)
     sensor = torch.rand(2, 3, 40, 56, generator=torch.Generator().manual_seed(1))
@@ -30,7 +30,7 @@ def test_restores_with_the_lens_adversary(codesigned_lens, backend):
 
 
 def test_runs_through_onnx_runtime_by_default_and_torch_when_the_export_fails(codesigned_lens, monkeypatch):
-    ctx = attacks.FitContext(lens=codesigned_lens)
+    ctx = attacks.FitContext(lens=codesigned_lens, adversary=codesigned_lens.adversary)
     sensor = torch.rand(1, 3, 24, 40, generator=torch.Generator().manual_seed(2))
     with torch.no_grad():
         expected = codesigned_lens.adversary(sensor).clamp(0, 1)
@@ -52,7 +52,7 @@ def test_runs_through_onnx_runtime_by_default_and_torch_when_the_export_fails(co
 
 def test_scores_a_frozen_copy(codesigned_lens):
     attack = attacks.load("training-adversary", backend="torch")
-    attack.fit(attacks.FitContext(lens=codesigned_lens))
+    attack.fit(attacks.FitContext(lens=codesigned_lens, adversary=codesigned_lens.adversary))
     sensor = torch.rand(1, 3, 32, 32)
     before = attack.restore(sensor)
     with torch.no_grad():
@@ -66,5 +66,5 @@ def test_fixed_lens_is_skipped_with_a_reason(fake_lens):
     ctx = attacks.FitContext(lens=fake_lens)
     reason = attack.skip_reason(ctx)
     assert reason and "adversary" in reason
-    with pytest.raises(ValueError, match="adversary"):
+    with pytest.raises(attacks.MissingRequirementError, match="adversary"):
         attack.fit(ctx)

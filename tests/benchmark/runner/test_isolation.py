@@ -216,17 +216,21 @@ def test_restore_and_read_hand_out_copies():
     assert torch.equal(sensor, kept)
 
 
-def test_each_attacker_gets_its_own_lens_and_extras():
+def test_each_attacker_gets_its_own_lens_and_adversary():
     import lenses
+    from attacks.networks import RED10
     from benchmark.runner.isolation import own_context
-    shared = attacks.FitContext(lens=lenses.load("defocus"), extras={"segmenter": None})
+    lens = lenses.load("defocus")
+    object.__setattr__(lens, "adversary", RED10(width=4))
+    shared = attacks.FitContext(lens=lens, adversary=lens.adversary)
+    before = [p.clone() for p in shared.adversary.parameters()]
     mine = own_context(shared)
-    mine.extras["segmenter"] = "mine"
+    assert mine.lens.adversary is mine.adversary  # one copy: the copied lens holds the copied adversary
     with torch.no_grad():
-        for p in mine.lens.parameters():
+        for p in [*mine.lens.parameters(), *mine.adversary.parameters()]:
             p.zero_()
-    assert shared.extras["segmenter"] is None
     assert torch.equal(shared.lens.psf(), lenses.load("defocus").psf())
+    assert all(torch.equal(a, b) for a, b in zip(shared.adversary.parameters(), before))
 
 
 # ---- a lens that fails; pictures -----------------------------------------------------------------

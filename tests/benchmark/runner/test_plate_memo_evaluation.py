@@ -46,7 +46,7 @@ class SceneLabels:
 def _attack(cfg: RunConfig, scenes, sensor: torch.Tensor, same_segmenter: bool):
     seg_sensor = SceneLabels(scenes)
     seg_restored = seg_sensor if same_segmenter else SceneLabels(scenes)
-    target = Target("fake", scenes, sensor, sensor, attacks.FitContext(extras={"segmenter": seg_sensor}),
+    target = Target("fake", scenes, sensor, sensor, attacks.FitContext(segmenter=seg_sensor),
                     seg_sensor, seg_restored)
     out = Attacked(restored={"raw": sensor.clone(), "gray-world": gray_world_balance(sensor)},
                    described={"raw": {"name": "raw"}, "gray-world": {"name": "gray-world"}}, references={"raw"},
