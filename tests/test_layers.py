@@ -1,8 +1,9 @@
 """The layers hold: common <- lenses (physics) <- attacks <- benchmark, inside benchmark one strict order of its
 stage packages (store <- scenes <- results <- codesign <- runner <- studies <- publish <- api <- cli),
+inside attacks one strict order of its rooms (ATTACK_ROOMS), no two module files share a basename,
 and no module imports itself back.
 
-Reads every .py file of the three packages with `ast` (no import is executed), so an import
+Reads every .py file of the four packages with `ast` (no import is executed), so an import
 hidden inside a function counts as much as one at the top.
 """
 
@@ -194,3 +195,55 @@ def test_common_is_the_lowest_layer():
                                                            "common.crops"}
     planted = {**graph, "common.crops": {"lenses.optics"}}
     assert backward_imports(planted) == ["common.crops -> lenses.optics"]
+
+
+# attacks' rooms, bottom to top: the plugin API, then what attackers share, then the attackers. Each may
+# import only itself and the rooms before it (the plate pipeline's stages are a room of their own).
+ATTACK_ROOMS = ("base", "registry", "backends", "networks", "readers.plates", "training", "restorers", "readers")
+
+
+def attack_room(module: str) -> str | None:
+    """The room of an attacks module (its first name below `attacks`; readers.plates apart), None for the root."""
+    parts = module.split(".")
+    if parts[0] != "attacks" or len(parts) < 2:
+        return None
+    return "readers.plates" if parts[1:3] == ["readers", "plates"] else parts[1]
+
+
+def room_violations(graph: dict[str, set[str]]) -> list[str]:
+    """Imports from an attacks room to a later one in ATTACK_ROOMS (or to a room it does not name)."""
+    bad = []
+    for name, deps in sorted(graph.items()):
+        here = attack_room(name)
+        if here is None:
+            continue
+        for d in sorted(deps):
+            there = attack_room(d)
+            if there is not None and there != here and (here not in ATTACK_ROOMS or there not in ATTACK_ROOMS
+                                                        or ATTACK_ROOMS.index(there) > ATTACK_ROOMS.index(here)):
+                bad.append(f"{name} -> {d}")
+    return bad
+
+
+def test_attacks_rooms_in_one_strict_order():
+    assert room_violations(import_graph()) == []
+
+
+def test_every_entry_of_attacks_is_a_named_room():
+    entries = {p.stem for p in (ROOT / "attacks").iterdir() if p.name not in ("__init__.py", "py.typed", "__pycache__",
+                                                                             "weights")}
+    assert entries == {r.split(".")[0] for r in ATTACK_ROOMS}
+
+
+def test_registered_attackers_live_in_the_attacker_rooms():
+    from importlib.metadata import entry_points
+    modules = {ep.value.split(":")[0] for ep in entry_points(group="privacy_lens_bench.attacks")
+               if ep.value.startswith("attacks.")}
+    assert modules and all(attack_room(m) in ("restorers", "readers") for m in modules), sorted(modules)
+
+
+def test_room_check_fails_on_a_planted_backward_import():
+    graph = import_graph()
+    planted = {**graph, "attacks.training.shipped_weights": graph["attacks.training.shipped_weights"]
+               | {"attacks.restorers.identity"}}
+    assert room_violations(planted) == ["attacks.training.shipped_weights -> attacks.restorers.identity"]
