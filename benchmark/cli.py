@@ -19,7 +19,7 @@ from typing import Any
 import common.offline  # noqa: E402,F401
 
 # Everything below imports torch (through lenses, attacks or the stages) only when a command needs it,
-# so that `--help` answers at once: tests/benchmark/test_cli_help.py checks that building the parser
+# so that `--help` answers at once: tests/benchmark/test_cli_messages.py checks that building the parser
 # imports no torch.
 EPILOG = """examples:
   python -m benchmark list                                        lenses, attackers, scene sets

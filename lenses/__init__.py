@@ -1,5 +1,12 @@
 """Lens simulation: Zernike phase mask, Fourier-optics PSF, sensor model, lens specs and registry.
 
+The phase mask (``zernike``, its glass in ``materials``), the PSF on the sensor grid (``optics``), image
+formation (``convolve``) and the sensor (``sensor``) make a camera (``lens``); a camera is a spec
+(``spec``, the built-in ones in ``specs/`` and ``builtin``), registered here by name. Beside them: the
+mask as a fab's height map (``mask_export``), object distance from pixel size (``depth``), and the
+attack-independent privacy bound (``bound``) and the sensor's raw electrons as the ideal observer's
+likelihood (``raw_likelihood``).
+
     lens = lenses.load("ideal")          # built-in / entry-point name, or a path to a .toml spec
     psf = lens.psf()                     # (3, K, K), each channel sums to 1
     y = lens(x, generator=g)             # (B,3,H,W) scene in [0,1] -> sensor image in [0,1]

@@ -307,8 +307,8 @@ class WidthCertificate:
 
 
 # The exact block bound in the W_eps search is built up to this many plate pixels: its n x n matrices
-# take ~0.5 GB at n = 2048 and its time grows as n^3 (measured 4.8 s at n = 1360, 3 channels, on the
-# 2-core CI machine under load); beyond it only the trace bound may certify.
+# take ~0.5 GB at n = 2048 and its time grows as n^3 (seconds already at n ~ 1400 on 2 cores,
+# docs/history.md); beyond it only the trace bound may certify.
 CERTIFY_MAX_PIXELS = BLOCK_MAX_PIXELS
 # A width is certified by the trace bound only with this relative margin, so that the rounding of
 # the two computations never certifies a width the exact bound alone would refuse.

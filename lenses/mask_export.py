@@ -1,6 +1,6 @@
 """A lens's phase mask as a height map a fab can make: glass thickness in micrometres on a stated grid.
 
-The mask thickness is h(x, y) = sum_j c_j Z_j(x / R, y / R) (DESIGN.md): c_j the spec's Noll
+The mask thickness is h(x, y) = sum_j c_j Z_j(x / R, y / R) (as in ``lenses.optics``): c_j the spec's Noll
 coefficients in um of glass, Z_j RMS-normalised over the unit disk, R half the aperture diameter.
 Each Z_j is written here as a polynomial in Cartesian x, y (from (x + iy)^|m| and (x^2 + y^2)^p),
 so the height and its derivatives (which Zemax's Grid Sag needs for bicubic interpolation) are

@@ -1,6 +1,6 @@
 """Fourier-optics PSF of a phase mask in front of a thin lens, landing on the sensor grid.
 
-Pupil field (DESIGN.md, paper eq. 1): U = A(rho) exp(i [2 pi / lambda (n_lambda - 1) h(rho, theta)
+Pupil field (the paper's eq. 1): U = A(rho) exp(i [2 pi / lambda (n_lambda - 1) h(rho, theta)
 + psi rho^2]), psi = pi R^2 / lambda (1/z_o + 1/z_s - 1/f). PSF(x_s) = |F{U}(x_s / (lambda z_s))|^2
 (eq. 2).
 
@@ -33,10 +33,10 @@ from lenses.zernike import max_gradient, zernike_basis
 
 # Window searched beyond the geometric blur radius, in units of lambda F#. The diffraction rings of
 # a hard-edged pupil carry energy far out: an in-focus F/5 lens holds 99 % of its energy within
-# about 35 px but needs about 260 px for 99.9 % (measured; see README "Modelling choices").
+# about 35 px but needs about 260 px for 99.9 % (measured; docs/modelling.md, "PSF support").
 DIFFRACTION_MARGIN_LAMBDA_F = 40.0
 # A 64-sample pupil leaves 1-2 % L1 error in the PSF from its staircase rim, 128 samples 0.2-0.4 %
-# (against 768 samples; measured in tests/speed/test_modelling_choices.py).
+# (against 768 samples; the PSF-grid study, docs/modelling.md, finds N = 64 within 1.2 dB of 128).
 MIN_PUPIL_SAMPLES = 128
 
 

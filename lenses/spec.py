@@ -1,7 +1,7 @@
 """Lens specifications: TOML files with validated fields whose names carry their units.
 
 A spec is the whole camera: optics, phase mask, sensor and simulation settings. Only `name` and the
-mask coefficients are required; everything else defaults to the physical defaults of DESIGN.md.
+mask coefficients are required; everything else takes the physical defaults of the dataclasses below.
 Any problem (missing field, unknown key, wrong type or unit, NaN, out-of-range value) raises
 LensSpecError naming the offending field.
 """
@@ -70,7 +70,7 @@ class SensorSpec:
 class SimulationSpec:
     # PSF support holds at least this energy. 0.99 rather than 0.999: the last 0.9 % lies in faint
     # diffraction rings out to ~260 px; cropping them changes a convolved image by 56 dB PSNR,
-    # 13 dB below the sensor's own shot noise at mid-grey, at a 7x smaller K (README, measured).
+    # 13 dB below the sensor's own shot noise at mid-grey, at a 7x smaller K (docs/modelling.md, measured).
     psf_energy_fraction: float = 0.99
     max_psf_size_px: int = 129
     max_pupil_samples: int = 1024

@@ -1,5 +1,5 @@
 """The reference of the batched plate reader's tests and benchmark: ``attacks.readers.plates.ocr.read_plates`` as it
-was before it batched (commit 34064c6), i.e. EasyOCR's public ``Reader.recognize`` on one canvas of the
+was before it batched (2026-11-24), i.e. EasyOCR's public ``Reader.recognize`` on one canvas of the
 prepared crops, which reads them one box at a time on the CPU. tests/ is on sys.path through its conftest.py.
 """
 

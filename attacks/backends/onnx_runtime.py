@@ -29,11 +29,9 @@ Backend = Literal["auto", "torch", "onnx"]
 BACKENDS: tuple[str, ...] = ("auto", "torch", "onnx")
 _OPSET = 17
 # Pixels per network call: 2 images of 512 x 1024, the most the evaluation hands a restorer in one call
-# (benchmark.runner.evaluation.RESTORE_PIXELS_PER_BATCH), so a restorer called directly batches as in a run. Four
-# were the budget before: on the 2-core AVX2 machine ONNX Runtime ran the quick NAFNet 1.5x (RED10 1.1x)
-# as fast four at a time as one at a time, on the 2-core AVX-512 machine NAFNet 0.71x (2026-11-29), while
-# two at a time there ran NAFNet 1.02x and RED10 1.13x (tests/speed/test_restorer_speed.py), at
-# half the activations' memory (NAFNet peaked at 2.8 GB resident with four).
+# (benchmark.runner.evaluation.RESTORE_PIXELS_PER_BATCH), so a restorer called directly batches as in a run.
+# Two a call are at least as fast as one on the machines measured, where four were not on every one, and
+# need half the activations' memory of four (tests/speed/test_restorer_speed.py; docs/history.md).
 DEFAULT_BATCH_PIXELS = 2 * 512 * 1024
 
 log = logging.getLogger(__name__)
@@ -96,10 +94,9 @@ class OnnxModel:
         self._input = self._session.get_inputs()[0].name
         # The CPU arena hands each intermediate of a run memory freed by earlier ones; without it, every
         # input size the session has not seen yet (the plate windows come in about 20) mallocs and
-        # page-faults each intermediate afresh: NAFNet's first call at 4 x 512 x 1024 took 27 s
-        # instead of 8 s on 2 cores. Shrinking the arena at the end of every run gives that memory
-        # back, so a run holding several restorers' sessions does not keep each one's peak (a fresh
-        # quick run once reached 24 GB with the arena kept): 0.8 GB resident after the call either way.
+        # page-faults each intermediate afresh, several times slower (docs/history.md). Shrinking the
+        # arena at the end of every run gives that memory back, so a run holding several restorers'
+        # sessions does not keep each one's peak (docs/history.md).
         self._run_options = ort.RunOptions()
         if shrink_arena:
             self._run_options.add_run_config_entry("memory.enable_memory_arena_shrinkage", "cpu:0")
@@ -121,10 +118,8 @@ class InferenceEngine:
             keeps the faster for good (an engine of the same architecture at the same image
             shape and thread count later in the process reuses those timings); on another device, or if the export fails, it uses torch
             (the reason is logged and kept in ``fallback_reason``).
-            The first real batch, not a small probe, decides: on 2 cores the quick NAFNet ties
-            at 256 x 256; at 512 x 1024 ONNX Runtime was once 1.8x faster, while in the quick runs of
-            2026-11-24 torch won (0.49-0.77 s against 0.66-0.83 s per image): which wins moves with
-            the versions and the machine, so it is timed, not assumed.
+            The first real batch, not a small probe, decides: which wins moves with the image size,
+            the versions and the machine (docs/history.md), so it is timed, not assumed.
         export_hw: (H, W) of the example image the ONNX graph is traced with (axes are dynamic).
         exporter: Returns the ONNX bytes of ``model`` (e.g. from a cache, exporting on a miss);
             default ``export_onnx`` on an example of ``export_hw``.

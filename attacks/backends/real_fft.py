@@ -4,12 +4,9 @@ Two implementations compute the same transforms to float rounding (tests/attacks
 ``torch.fft``, and on the CPU without autograd ``scipy.fft`` (pocketfft) on the tensors' own memory,
 with the filter's product taken in place by numpy. Which is faster is a property of the machine and
 the versions, so ``CPU_FFT`` names the one used on the CPU; a GPU or a graph that needs gradients
-always takes ``torch.fft``. On the 2-core machine of 2026-11-25 (torch 2.15.0) scipy ran ``rfft2``
-1.5x and ``irfft2`` 2.5x as fast at the quick shapes; on the 2-core AVX2 machine of 2026-11-27
-(torch 2.14.1) torch.fft was the faster, both paths alternating in one run on the shapes of
-tests/speed/test_deconvolution_speed.py: Richardson-Lucy 1.45x on 4 quick scenes and 1.26x on
-plate windows, Wiener 1.51x on windows and even (0.98) on scenes; one filtering of a 3 x 576 x 1080
-image took 18.7 against 25.8 ms.
+always takes ``torch.fft``. It is ``torch.fft``, the faster on the machine measured last
+(tests/speed/test_deconvolution_speed.py runs both paths alternating; docs/modelling.md, "Speed of
+the evaluation"; the measurements per machine: docs/history.md).
 
 ``image_chunks`` splits a batch so that each chunk's spectrum stays under ``CHUNK_BYTES``: every
 temporary of an iteration then stays below glibc's 32 MiB mmap ceiling and is reused from the
@@ -36,10 +33,8 @@ CHUNK_BYTES = 16 << 20
 
 ITERATIVE_CHUNK_BYTES = 4 << 20
 """Largest spectrum of one chunk for a filter applied many times to the same chunk (Richardson-Lucy's
-iterations). On the 2-core AVX-512 machine of 2026-11-28 (torch 2.14.1), 20 iterations with the quick gp
-PSF, best of 4 alternating rounds: 4 x 512 x 1024 frames 2.52 s at ``CHUNK_BYTES`` (two frames a chunk)
-against 2.13 s at this bound (one), plate windows of 4 sizes 3.04 against 2.44 s; a single filtering
-(Wiener) gained nothing (0.25 against 0.27 s). The outputs move by float rounding (at most 2e-6): a
+iterations): those ran faster in chunks this small than at ``CHUNK_BYTES``, while a single filtering
+(Wiener) gained nothing (docs/history.md). The outputs move by float rounding (at most 2e-6): a
 batched FFT rounds differently from a single one."""
 
 

@@ -9,13 +9,11 @@ Every ``NAFBlock`` becomes a ``FoldedNAFBlock``:
   depthwise ``conv2`` with it), so the gate multiplies two tensors instead of slicing one.
 
 The result equals the original up to float rounding (tests/attacks/networks/test_nafnet_folded.py: 1e-5 on
-[0, 1] images). On 2 cores (AVX2, 2026-11-27, machine otherwise idle) ONNX Runtime ran the quick NAFNet at
-512 x 1024, two images a call, at 1.13 images/s folded against 0.91 plain (1.24x; 0.98 against 0.71,
-1.37x, before ``LayerNorm2d`` used torch's fused ``layer_norm``), as measured by
-tests/speed/test_restorer_speed.py; the plain graph had spent 10 % of its time slicing for the
-gates. Its normalisation stays written out as operations: through ``layer_norm`` (two transposes in
-the graph) the folded network ran 0.82-1.01 images/s against 1.03-1.15. Training uses the
-plain ``NAFNet``: folding is for a network whose weights no longer change.
+[0, 1] images). ONNX Runtime runs the folded network faster than the plain one, whose graph spends a
+share of its time slicing for the gates (tests/speed/test_restorer_speed.py times both; docs/modelling.md,
+"Restorer inference"). Its normalisation stays written out as operations: through ``layer_norm`` (two
+transposes in the graph) the folded network ran slower (docs/history.md). Training uses the plain
+``NAFNet``: folding is for a network whose weights no longer change.
 """
 
 from __future__ import annotations

@@ -57,9 +57,9 @@ def build_adversary(width: int, lens: Lens | None = None) -> RED10:
 def for_training(net: RED10, device: str) -> RED10:
     """``net`` on ``device`` in channels-last layout, as the co-design trains it: with its weights in
     the default layout every convolution's backward copied its activations into another layout first (6
-    copies of 16 MB a quick step, 6 ms each on 2 cores); a quick gp co-design step took 0.79-0.83 s before
-    and 0.76-0.77 s after (three rounds each, 2-core AVX-512 machine, 2026-11-29). The values are the
-    same; ``save_weights`` stores them contiguous, and evaluation loads them into a default-layout net.
+    copies of 16 MB a quick step), which channels-last avoids: a quick gp co-design step runs a few per
+    cent faster (docs/costs.md; docs/history.md). The values are the same; ``save_weights`` stores them
+    contiguous, and evaluation loads them into a default-layout net.
     The layout is the restorer fits' (``attacks.training.restorer_training.TRAINING_LAYOUT``), for the same reason."""
     return net.to(device).to(memory_format=TRAINING_LAYOUT)
 

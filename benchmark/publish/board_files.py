@@ -1,4 +1,4 @@
-"""The leaderboard's files beyond its README: what `report` writes and what it deletes (issue 37, item 5).
+"""The leaderboard's files beyond its README: what `report` writes and what it deletes.
 
 Everything under ``leaderboard/`` is either an entry (``entries/*.json``), a study (``studies/``), or
 written by ``python -m benchmark report`` from them: README.md (short: the headline table, the findings

@@ -1,4 +1,4 @@
-"""Choosing the standard attack ensemble from measurements (issue 37, item 1): which chains decide.
+"""Choosing the standard attack ensemble from measurements: which chains decide.
 
 On a set of leaderboard entries (the published quick ones), for every attack chain of every lens:
 
@@ -13,13 +13,13 @@ On a set of leaderboard entries (the published quick ones), for every attack cha
 
 The rule (``keeps``): a chain stays in the standard ensemble when its removal changes some lens's
 ensemble plate accuracy by more than ``PLATE_POINTS`` points or its ensemble PSNR by more than
-``PSNR_DB`` dB. The issue adds ``lpdr`` (the paper's detector pipeline) on the sensor image and after
+``PSNR_DB`` dB. To those it adds ``lpdr`` (the paper's detector pipeline) on the sensor image and after
 the strongest restorer (the one that is the best restorer on the most scenes of the entries), and the
 learned reader, which the rule keeps once entries hold it. ``PROPOSED_ENSEMBLE`` is what that selects on the published quick
 entries (docs/ensemble.md, written by ``python -m benchmark.studies.ensemble_choice_study``;
 tests/benchmark/results/test_ensemble_choice.py recomputes it, so it cannot drift from the entries).
 
-``STANDARD_ENSEMBLE`` is the run's default (benchmark.runner.runner.standard_selection): the proposal (with
+``STANDARD_ENSEMBLE`` is the run's default (``benchmark.runner.runner.standard_attackers``): the proposal (with
 the learned reader on the sensor image) and the ``raw`` reference (the uncorrected image's PSNR, no chain).
 """
 

@@ -22,7 +22,7 @@ def psnr(x: torch.Tensor, ref: torch.Tensor, data_range: float = 1.0) -> torch.T
     """PSNR in dB per image of (B,C,H,W) tensors; inf where identical.
 
     One image at a time: the float64 differences of a chunk of 8 quick scenes (three 100 MB
-    temporaries) set a fresh quick gp run's resident peak (7.83 GiB, 2026-11-27)."""
+    temporaries) once set a quick run's resident peak (docs/history.md)."""
     if x.shape[0] == 0:
         return torch.zeros(0, dtype=torch.float64, device=x.device)
     mse = torch.stack([((a.double() - b.double()) ** 2).mean() for a, b in zip(x, ref)])
@@ -41,8 +41,9 @@ def ssim(x: torch.Tensor, ref: torch.Tensor, data_range: float = 1.0) -> torch.T
 
     Each of the five local moments is one separable OpenCV filter in float64, averaged over the
     region scikit-image keeps (the border of the filter's radius is cropped, so the border mode
-    never enters). OpenCV's vectorised filter is about 14x torch's grouped float64 conv2d on
-    2 cores (64 quick scenes: about 4 s instead of 51 s); the values agree to 1e-15.
+    never enters). OpenCV's vectorised filter runs many times faster than torch's grouped float64
+    conv2d (docs/modelling.md, "Speed of the evaluation"; tests/speed/test_ssim_speed.py); the values
+    agree to 1e-15.
     """
     if x.shape != ref.shape or x.dim() != 4:
         raise ValueError(f"SSIM needs two (B,C,H,W) tensors of one shape, got {tuple(x.shape)} and {tuple(ref.shape)}")
@@ -68,8 +69,8 @@ def ssim(x: torch.Tensor, ref: torch.Tensor, data_range: float = 1.0) -> torch.T
         return float(s.mean())
 
     # OpenCV's filter and NumPy's arithmetic release the GIL and run one thread each, so channel
-    # images go to torch's thread count of threads (2 cores: 1.55x, 0.85 s against 1.31 s for 8
-    # quick scenes; the same arithmetic per channel, so the same values bit for bit).
+    # images go to torch's thread count of threads (faster on 2 cores: docs/modelling.md, "Restorer
+    # inference"; the same arithmetic per channel, so the same values bit for bit).
     with ThreadPoolExecutor(max(1, torch.get_num_threads())) as pool:
         values = list(pool.map(channel, np.ndindex(*x.shape[:2])))
     out = np.array(values, dtype=np.float64).reshape(x.shape[:2])

@@ -3,7 +3,7 @@
 ``PROPOSED_ENSEMBLE`` is what the rule of ``benchmark.results.ensemble_choice`` (``keeps``) selects on the
 published quick entries (docs/ensemble.md, written by ``python -m benchmark.studies.ensemble_choice_study``;
 tests/benchmark/results/test_ensemble_choice.py recomputes it, so it cannot drift from the entries).
-``STANDARD_ENSEMBLE`` is what a run measures unless told otherwise (``benchmark.runner.runner.standard_selection``).
+``STANDARD_ENSEMBLE`` is what a run measures unless told otherwise (``benchmark.runner.runner.standard_attackers``).
 """
 
 from __future__ import annotations

@@ -247,7 +247,7 @@ def exclusive(lock_path: Path) -> Iterator[None]:
 
 
 class ArtifactCache:
-    """`attacks.ArtifactStore` over a folder: `<root>/<kind>/<config hash of key><suffix>`, verified."""
+    """`attacks.base.ArtifactStore` over a folder: `<root>/<kind>/<config hash of key><suffix>`, verified."""
 
     def __init__(self, root: Path, suffix: str = ".safetensors"):
         self.root = Path(root)

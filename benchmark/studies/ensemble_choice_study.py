@@ -1,4 +1,4 @@
-"""The standard-ensemble study (issue 37, item 1): docs/ensemble.md from the published quick entries.
+"""The standard-ensemble study: docs/ensemble.md from the published quick entries.
 
     python -m benchmark.studies.ensemble_choice_study [--dir leaderboard] [--out docs/ensemble.md]
 

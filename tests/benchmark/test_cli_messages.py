@@ -1,5 +1,5 @@
-"""The CLI and the Python API answer bad input with a sentence naming it, before any compute
-(issue 38, 9 and 10), and the CLI explains itself at once (issue 40: `--help` without torch,
+"""The CLI and the Python API answer bad input with a sentence naming it, before any compute,
+and the CLI explains itself at once (`--help` without torch,
 examples, `list` with what each lens and attacker is, `run --help` with the attackers that run by
 default)."""
 

@@ -1,6 +1,6 @@
 """A smoke run makes no outbound name lookup or connection, from Python or from a native thread
-(issue 38, 8: ONNX Runtime's telemetry looked up ``mobile.events.data.microsoft.com`` 6-12 times a
-run from its own threads until ``attacks`` set ``ORT_DISABLE_TELEMETRY``).
+(ONNX Runtime's telemetry looked up ``mobile.events.data.microsoft.com`` 6-12 times a run from its
+own threads until ``attacks`` set ``ORT_DISABLE_TELEMETRY``).
 
 Two nets catch it: a ``sitecustomize`` that refuses and records every Python-level lookup or
 connection, and ``strace -f -e trace=network`` that records every socket the process or any of

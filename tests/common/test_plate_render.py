@@ -10,7 +10,7 @@ import common.plate_render as shared
 import common.plate_render as scene_plates
 from benchmark.scenes.synthetic import generate_synthetic
 
-# sha256 of the outputs of common.plate_render on main before the renderer moved (commit b728289,
+# sha256 of the outputs of common.plate_render on main before the renderer moved (2026-11-22,
 # Pillow and FreeType of the suite's environment).
 PLATES_SHA256 = "6d06d40cda77fb16277223ed8ffec4c89a8cb4e9d21fb935e348e2d5622d66bb"
 SCENE_SHA256 = "cbd3a3a444cedfd23c53b40abbfe1c5a4dc74c5f524bcb300c877c46690a380b"

@@ -1,4 +1,4 @@
-"""Everything under leaderboard/ is an entry, a study, or written by `report` from them (issue 37, item 5)."""
+"""Everything under leaderboard/ is an entry, a study, or written by `report` from them."""
 
 from __future__ import annotations
 

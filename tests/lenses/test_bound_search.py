@@ -1,4 +1,4 @@
-"""The W_eps search (issue 13: a very dark lens made it build ~14 000 x 14 000 matrices for hours):
+"""The W_eps search (a very dark lens once made it build ~14 000 x 14 000 matrices for hours):
 its trace bound against the matrices it replaces, the same widths and rows as the exact one-pixel-at-a-time
 search for normal lenses, and a dark lens certified without a single block matrix."""
 
@@ -77,7 +77,7 @@ def test_normal_lenses_get_the_widths_and_rows_of_the_exact_search():
 
 def test_a_very_dark_lens_is_certified_without_building_block_matrices(monkeypatch):
     spectrum = smooth_spectrum()
-    dark = builtin("ideal", aperture_mm=0.01)  # the issue's lens: 2.7e-6 of the light per unit radiance
+    dark = builtin("ideal", aperture_mm=0.01)  # that lens: 2.7e-6 of the light per unit radiance
     built: list[int] = []
     original = bound._psf_gram
     monkeypatch.setattr(bound, "_psf_gram", lambda psf, w, h: (built.append(w * h), original(psf, w, h))[1])

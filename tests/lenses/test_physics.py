@@ -73,7 +73,7 @@ def test_airy_reference_quadrature_matches_adaptive_integration():
 
 
 def test_default_psf_matches_pixel_integrated_airy_within_one_percent():
-    """Issue 14 item 5: the in-focus ideal lens (F/5, 3.45 um pixels) at the suite's default geometry
+    """The in-focus ideal lens (F/5, 3.45 um pixels) at the suite's default geometry
     against the closed-form pixel-integrated Airy pattern, every channel, relative L2 < 1 %."""
     s = spec()
     geometry, _ = choose_geometry(s)

@@ -26,7 +26,7 @@ def with_(section, key, value):
     (with_("sensor", "quantum_efficiency", [0.4, 0.6]), r"sensor\.quantum_efficiency must have 3 entries"),
     (with_("sensor", "quantum_efficiency", [0.4, 1.6, 0.5]), r"sensor\.quantum_efficiency\[1\]"),
     (with_("sensor", "adc_bits", 10.5), r"sensor\.adc_bits must be an integer"),
-    # Issue 38: values the float32 sensor model cannot represent overflowed inside a task.
+    # Values the float32 sensor model cannot represent are refused at load, not left to overflow inside a task.
     (with_("sensor", "adc_bits", 1000), r"sensor\.adc_bits = 1000 .*valid: 1 to 24"),
     (with_("sensor", "white_level_photons", 1e300), r"sensor\.white_level_photons = 1e\+300 .*valid: > 0 to 1e\+15"),
     (with_("sensor", "full_well_e", 1e300), r"sensor\.full_well_e = 1e\+300 .*valid: > 0 to 1e\+15"),

@@ -1,5 +1,5 @@
-"""Richardson-Lucy and Wiener deconvolution as they were at commit c24f11d, before the speed work of
-issue 17: the oracle that the faster code must equal (tests/attacks/test_deconvolution_equivalence.py)
+"""Richardson-Lucy and Wiener deconvolution as they were on 2026-11-24, before the speed work:
+the oracle that the faster code must equal (the equality tests of test_deconvolution_speed.py)
 and the baseline of its speed ratio (test_deconvolution_speed.py). Frozen on purpose; only the tests
 import it.
 
@@ -268,12 +268,12 @@ def richardson_lucy(y: Tensor, psf: Tensor, iterations: int) -> Tensor:
     return result
 
 def restore_wiener(sensor: Tensor, psf: Tensor, gain: Tensor) -> Tensor:
-    """``WienerKnownPSF.restore`` of commit c24f11d."""
+    """``WienerKnownPSF.restore`` before the speed work."""
     gain = gain.to(device=sensor.device, dtype=sensor.dtype)
     deblurred = wiener_deconvolve(sensor, psf, sigma=bayer_noise_sigma(sensor))
     return (deblurred / gain[:, None, None]).clamp(0.0, 1.0)
 
 def restore_richardson_lucy(sensor: Tensor, psf: Tensor, gain: Tensor, iterations: int) -> Tensor:
-    """``RichardsonLucyKnownPSF.restore`` of commit c24f11d."""
+    """``RichardsonLucyKnownPSF.restore`` before the speed work."""
     divided = sensor / gain.to(device=sensor.device, dtype=sensor.dtype)[:, None, None]
     return richardson_lucy(divided, psf, iterations).clamp(0.0, 1.0)

@@ -1,5 +1,5 @@
-"""The lens forward (convolution + sensor) as it was at commit b728289, before the speed work of
-issue 17: the oracle that the faster code must equal (within 1e-5) and the baseline of its speed
+"""The lens forward (convolution + sensor) as it was on 2026-11-22, before the speed work:
+the oracle that the faster code must equal (within 1e-5) and the baseline of its speed
 ratio. Frozen on purpose; only the tests import it.
 
 Given the same PSF and noise generator it computes what lenses.Lens.forward computes: reflect-pad,
@@ -70,7 +70,7 @@ def demosaic(raw: torch.Tensor) -> torch.Tensor:
 
 def forward(x: torch.Tensor, psf: torch.Tensor, sensor: SensorSpec, aperture_diameter_mm: float,
             generator: torch.Generator | None = None) -> torch.Tensor:
-    """Scene (B,3,H,W) -> sensor image (B,3,H,W) through PSF (3,K,K), as lenses.Lens did at b728289."""
+    """Scene (B,3,H,W) -> sensor image (B,3,H,W) through PSF (3,K,K), as lenses.Lens did before the speed work."""
     area_scale = (aperture_diameter_mm / sensor.reference_aperture_diameter_mm) ** 2
     electrons_per_unit = sensor.white_level_photons * area_scale * torch.tensor(sensor.quantum_efficiency)
     irradiance = convolve(x, psf)

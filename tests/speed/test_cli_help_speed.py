@@ -1,4 +1,4 @@
-"""`python -m benchmark --help` answers in under 2 s on 2 CPU cores (issue 40): a whole process,
+"""`python -m benchmark --help` answers in under 2 s on 2 CPU cores: a whole process,
 interpreter start included (0.13 s quiet on the 2-core machine, 2026-11-29; it took 3.2 s while the
 parser imported torch). tests/benchmark/test_cli_messages.py checks the cause on every run: building
 the parser imports no torch."""

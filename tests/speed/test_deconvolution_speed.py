@@ -1,7 +1,7 @@
 """Wiener and Richardson-Lucy restorers: the same output as before the speed work, and faster.
 
 Run with `pytest tests/speed/test_deconvolution_speed.py --benchmark-only`. The baseline is
-`deconvolution_before` (the code of commit c24f11d); both paths alternate in the same rounds, so both
+`deconvolution_before` (the code of 2026-11-24); both paths alternate in the same rounds, so both
 see the same load on the shared machine, and their ratio goes to `extra_info`. The workload is the
 quick profile's: 4 sensor images of 512 x 1024 (half an evaluation batch), and plate windows of a
 few sizes, grouped by size as the evaluation hands them over. The equality tests are ordinary tests and

@@ -1,8 +1,8 @@
 """Lens speed (pytest-benchmark; run with `pytest tests/speed --benchmark-only`).
 
-Targets on the 2-core CPU (issue 17): the lens forward (PSF convolution + sensor) >= 25 images/s at
+Targets on the 2-core CPU: the lens forward (PSF convolution + sensor) >= 25 images/s at
 512 x 1024 in batches of 8, and faster than the forward before the speed work
-(`lens_forward_before`, the code of commit b728289) in the same run. The equality of the two is an
+(`lens_forward_before`, the code of 2026-11-22) in the same run. The equality of the two is an
 ordinary test and runs by default. The PSF with its gradient is timed against prysm in
 test_psf_speed.py.
 """

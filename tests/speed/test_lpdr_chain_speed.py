@@ -1,4 +1,4 @@
-"""One `lpdr` chain on quick plate windows, the code before issue 17's changes against now, as a ratio in one run.
+"""One `lpdr` chain on quick plate windows, the code before the speed work against now, as a ratio in one run.
 
 Run with `pytest tests/speed/test_lpdr_chain_speed.py --benchmark-only`: the target (now no slower than
 before, <= TARGET_RATIO, fastest of ROUNDS interleaved rounds) is asserted then: a rule that holds on both machines
@@ -9,7 +9,7 @@ sliding windows and read with EasyOCR on THREADS threads, as a run does. Before:
 the ONNX graph, the recognizer's per-crop tail on the caller's threads. Now: the head folded
 (benchmark/codesign/utility/segformer_onnx.py ``FoldedSegformerLogits``), the tail on one thread (attacks/readers/plates/ocr.py
 ``one_thread``). `extra_info` holds both ways' seconds per window by stage, the ratio, the threads and the load,
-and the seconds a chain of the quick run's 201 windows would take at this speed (the issue's target: <= 15 s on
+and the seconds a chain of the quick run's 201 windows would take at this speed (the target: <= 15 s on
 2 idle cores; not asserted, as the machine is shared).
 """
 
@@ -41,7 +41,7 @@ TARGET_RATIO = 1.0
 ROUNDS = 2
 THREADS = 2
 FRAMES = 8
-QUICK_WINDOWS = 201  # plate windows of the quick profile at seed 0 (issue 17)
+QUICK_WINDOWS = 201  # plate windows of the quick profile at seed 0 when the target was set (plates from 32 px)
 
 
 def test_lpdr_chain_before_vs_now(benchmark, request, tmp_path, monkeypatch):

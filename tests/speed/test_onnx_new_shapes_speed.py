@@ -2,7 +2,7 @@
 about 20 sizes, grouped by size, so most of its network calls are a session's first at that size.
 
 Run with `pytest tests/speed/test_onnx_new_shapes_speed.py --benchmark-only`. Baseline: the
-session as it was at commit c24f11d (CPU memory arena off), against ``attacks.backends.onnx_runtime.OnnxModel``
+session as it was on 2026-11-24 (CPU memory arena off), against ``attacks.backends.onnx_runtime.OnnxModel``
 (arena on, shrunk after every run). Each round builds fresh sessions of both, so every call is a
 first call at its size; the two alternate round by round, seeing the same load on the shared machine.
 """
@@ -25,7 +25,7 @@ WINDOW_SHAPES = [(8, 256, 320), (8, 256, 384), (4, 384, 448)]
 
 
 class _SessionBefore:
-    """The ONNX Runtime session of commit c24f11d: no CPU memory arena."""
+    """The ONNX Runtime session before the speed work: no CPU memory arena."""
 
     def __init__(self, onnx_bytes: bytes) -> None:
         options = ort.SessionOptions()

@@ -1,6 +1,6 @@
 """RGB PSF speed: the suite's PSF with its gradient against prysm's forward-only RGB PSF.
 
-Run with `pytest tests/speed/test_psf_speed.py --benchmark-only`. Target (issue 17): the PSF
+Run with `pytest tests/speed/test_psf_speed.py --benchmark-only`. Target: the PSF
 with its gradient through the mask coefficients takes no longer than prysm's forward-only RGB PSF at
 the same pupil grid and the same sensor samples, ratio <= 1 in one run.
 

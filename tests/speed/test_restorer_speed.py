@@ -4,7 +4,7 @@ image at a time.
 
 Run with `pytest tests/speed/test_restorer_speed.py --benchmark-only`. Both paths of a
 comparison alternate in the same rounds, so both see the same load on the shared machine; the
-throughputs and their ratio go to `extra_info`. Targets (issue 17): ``backend="auto"`` as fast as the
+throughputs and their ratio go to `extra_info`. Targets: ``backend="auto"`` as fast as the
 faster of torch and ONNX Runtime on the machine (within timing noise), batching no slower than one
 image at a time, and the NAFNet folded for inference more than 1.1x the plain one.
 The chart test at the end is an ordinary test and runs by default.

@@ -4,7 +4,7 @@ Run with `pytest tests/speed/test_segformer_speed.py --benchmark-only`. The ship
 net segments 8 images (the profile's batch) by sliding 256 x 256 windows (the quick window, stride
 192) with 2 threads, through `predict` with the torch path (the code before ONNX Runtime) and with
 the ONNX Runtime engine, alternating rounds so both see the same load on the shared machine.
-Target (issue 17): ONNX Runtime faster than torch, with the same predictions; the ratio is stored in
+Target: ONNX Runtime faster than torch, with the same predictions; the ratio is stored in
 `extra_info` and is why `benchmark.codesign.utility.segformer_onnx` uses ONNX Runtime on the CPU.
 """
 

@@ -1,4 +1,4 @@
-"""Training steps now against the code before issue 17's training changes, as ratios in one run.
+"""Training steps now against the code before the training speed work, as ratios in one run.
 
 Run with `pytest tests/speed/test_training_step_speed.py --benchmark-only`. Before: ``transformers``'
 decode head and ``F.interpolate`` for the logits (the code before benchmark/codesign/utility/bilinear.py), and the

@@ -157,9 +157,9 @@ class SharedFeatures(torch.nn.Module):
     An input row it has already seen returns its earlier output instead of being recomputed. EasyOCR's
     second pass (``get_text``) re-reads every crop read with confidence < 0.1 with its contrast stretched,
     but leaves a crop whose contrast is already at the target as it is: that crop reaches the network as
-    the very tensor of the first pass, and its scores, and so its read, are the first pass's. In the quick
-    sharp and gp evaluations (seed 0, 2026-11-27) 952 of the 3196 crops of the second pass were such
-    crops: 13 % of all the columns the recognizer was given (EasyOCR pads a crop to a multiple of 64).
+    the very tensor of the first pass, and its scores, and so its read, are the first pass's. Such crops
+    are a sizeable share of the second pass in a quick evaluation (docs/modelling.md, "Second OCR pass
+    only where it changes the input"; EasyOCR pads a crop to a multiple of 64 columns).
     """
 
     def __init__(self, model: Any, backend: str = "torch") -> None:  # EasyOCR's Model: parts in _MODEL_PARTS
@@ -192,10 +192,9 @@ def one_thread() -> Iterator[None]:
     """Torch on one intra-op thread within the block (the caller's count is back after it).
 
     The quantized BiLSTM of one crop is a chain of (1 x 256) x (256 x 1024) products, one per time
-    step: splitting each over threads costs more than it saves (on 2 cores, 1 thread read a crop's
-    tail in 8 ms, 2 threads in 177 ms with the machine loaded 6-fold; tests/speed/
-    test_lpdr_chain_speed.py). Integer accumulation makes the output the same at any thread count
-    (tests/attacks/test_lpdr_fast_paths.py).
+    step: splitting each over threads costs more than it saves, many times more on a loaded machine
+    (docs/modelling.md, "Speed of the evaluation"; tests/speed/test_lpdr_chain_speed.py). Integer
+    accumulation makes the output the same at any thread count (tests/attacks/readers/test_ocr_threads.py).
     """
     before = torch.get_num_threads()
     torch.set_num_threads(1)

@@ -1,9 +1,9 @@
 """The recognizer's convolutional feature extractor through ONNX Runtime on the CPU.
 
-EasyOCR's english_g2 spends most of a plate read in its VGG feature extractor (measured on quick plate
-windows, lpdr-oracle, 2 threads: 39.5 s of 41.4 s in the convolutions, 2 s in the per-crop BiLSTM
-tail), and ONNX Runtime runs those convolutions in 0.4-0.6x torch's time on this 2-core machine
-(tests/speed/test_ocr_features_speed.py). Only the convolutions move: the dynamically quantized
+EasyOCR's english_g2 spends most of a plate read in its VGG feature extractor (about 95 % of it on the
+quick plate windows, the per-crop BiLSTM tail most of the rest), and ONNX Runtime runs those
+convolutions faster than torch on the CPUs measured (tests/speed/test_ocr_features_speed.py;
+docs/modelling.md, "OCR convolutions in ONNX Runtime"; docs/history.md). Only the convolutions move: the dynamically quantized
 tail stays in torch (``attacks.readers.plates.ocr.SharedFeatures``). The two backends agree to float rounding
 (about 1e-6 of features of magnitude 4); ``tests/attacks/readers/test_ocr_onnx.py`` checks the agreement, that a
 crop's features do not depend on its batch, and that plates read alike.

@@ -2,12 +2,12 @@
 
 SegFormer's decode head resizes each of its four stages' maps to the first stage's size, and
 `segment_logits` resizes the logits to the image: with ``F.interpolate`` on the CPU the backward of
-those resizes (a scatter kernel: about 13 ms for one (8, 256, 32, 32) map on 2 cores) and the copies
-around it took about a fifth of a quick co-design step (torch.profiler, 2026-11-29). The same resize is
+those resizes (a scatter kernel) and the copies around it took about a fifth of a quick co-design
+step (docs/history.md). The same resize is
 ``A_h @ x @ A_w^T`` with fixed (out, in) weight matrices of two non-zeros a row, whose forward and
 backward are dense matrix products; the first stage, already at the target size, is not resized at all
-(``F.interpolate`` copies it). tests/speed/test_training_step_speed.py times both in one run:
-a quick utility-net step 1.14-1.25x, a quick gp co-design step 1.10-1.21x (2-core AVX-512 machine).
+(``F.interpolate`` copies it). tests/speed/test_training_step_speed.py times both in one run; the
+training steps are faster with the products (docs/costs.md; docs/history.md).
 
 The weights are torch's own (``area_pixel_compute_source_index`` with ``align_corners=False``: source
 ``(dst + 0.5) * in / out - 0.5``, clamped at 0, both neighbours' lambdas), so the result equals

@@ -1,9 +1,8 @@
 """SegFormer evaluation inference through ONNX Runtime, exported once per set of weights.
 
-On the 2-core CPU, ONNX Runtime runs SegFormer-B0's sliding-window inference (the quick profile's
-256 x 256 windows, 8 at a time, 2 threads) 1.5-2.2x as fast as eager torch (1.86x in
-tests/speed/test_segformer_speed.py, which asserts that it wins, before the head was folded;
-2.17x with it, load 6), so evaluation on the CPU
+On the CPU, ONNX Runtime runs SegFormer-B0's sliding-window inference (the quick profile's 256 x 256
+windows, 8 at a time) faster than eager torch (tests/speed/test_segformer_speed.py asserts that it
+wins; docs/modelling.md, "Speed of the evaluation"; docs/history.md), so evaluation on the CPU
 uses it by default. The backend is fixed, not timed per run as the restorers' ``"auto"`` is, so the same
 weights on the same machine always give the same predictions (the two backends differ by ~1e-7 in
 the logits, ~1e-5 with the folded head below, which can flip a near tie; lpdr's vehicle boxes and reads on
@@ -15,8 +14,8 @@ The exported graph is ``FoldedSegformerLogits``: the decode head's 1x1 fuse conv
 channels at a quarter of the input resolution, about three quarters of B0's multiply-adds at 256 x 256)
 and its batch norm folded into each stage's projection, which is exact algebra (bilinear upsampling is
 linear and keeps constants), so the logits agree with ``segment_logits`` to float rounding (~1e-5)
-while ONNX Runtime runs 1.5x as fast on one thread (8 quick windows: 0.63 s against 0.95 s, load 4.5;
-the lpdr vehicle stage 1.34x at load 7.5 in tests/speed/test_lpdr_chain_speed.py).
+while ONNX Runtime runs the folded graph faster than the unfolded one (docs/history.md; the lpdr
+vehicle stage is timed by tests/speed/test_lpdr_chain_speed.py).
 """
 
 from __future__ import annotations
@@ -168,8 +167,7 @@ def segformer_engine(net: nn.Module, cache_dir: Path, window: tuple[int, int],
     # torch runs the head as trained (the reference); ONNX Runtime the folded head (same logits to ~1e-5).
     # The arena is kept between runs: every run is at most a batch of sliding windows, so it stays
     # bounded (about 200 MiB more resident), while giving it back after each run and faulting it in
-    # again made the quick sharp-scene scoring 1.2-1.4x as slow (32 val frames, 2 cores, quiet:
-    # 31.7, 26.7, 31.3 s against 24.6, 22.8, 24.3 s, interleaved, 2026-11-28).
+    # again made the quick sharp-scene scoring slower (docs/history.md).
     engine = InferenceEngine(model, backend, exporter=exporter, batch_pixels=_UNSPLIT, fallback=True,
                              shrink_arena=False)
     if engine.backend == "onnx":  # the session holds its own copy of the weights; torch would share `net`

@@ -9,7 +9,7 @@ from matplotlib.figure import Figure
 
 from benchmark.results.charts import new_figure
 
-TARGET_MIOU = 0.5  # issue 14's target for the sharp-scene mIoU on `quick`
+TARGET_MIOU = 0.5  # the target for the sharp-scene mIoU on `quick` (docs/modelling.md, "Clean utility net")
 
 
 def pretrain_figure(provenance: dict[str, Any]) -> Figure:

@@ -3,12 +3,10 @@
 oneDNN, which runs torch's CPU convolutions, caches every primitive it compiles (one per layer,
 input shape and direction) with the buffers it owns, up to ``ONEDNN_PRIMITIVE_CACHE_CAPACITY``
 primitives, 1024 by default. The evaluation feeds networks hundreds of plate windows of distinct
-sizes, so the cache only grows: with torch 2.14.1 a quick NAFNet (width 16) on 60 windows of distinct
-sizes grew the process by 2.0 GB at the default capacity and 2.1 GB at 256, by 0.6 GB at 64, and a
-quick run of os-d-100 and os-info was killed for memory at 19.5 GB resident (2026-11-26; the same
-runs peaked at 7-8 GB with torch 2.15.0). At 128 the cache still holds most of a training step's
-primitives: a SegFormer-B0 + RED10 + NAFNet step at 128 x 128 took 1.07-1.09 s against 1.04 s at
-1024 (fastest of 8, 1 thread, another job on the machine), 3-5 % slower; 64 was 5-7 % slower.
+sizes, so the cache only grows: with torch 2.14.1 by gigabytes in a quick evaluation, enough to have
+a quick run killed for memory (docs/costs.md; docs/history.md). At 128 the cache still holds most of a
+training step's primitives: a step is a few per cent slower than at 1024, and at 64 slower still
+(docs/history.md).
 
 The capacity is read when oneDNN first builds a primitive, so it is set when ``benchmark`` is
 imported, before any network runs; a value the user set in the environment is kept.
@@ -16,15 +14,14 @@ imported, before any network runs; a value the user set in the environment is ke
 glibc's allocator keeps what a task frees for later allocations instead of giving it back to the
 system: torch's large tensors land in its heap once the mmap threshold has risen (it follows the
 largest block freed, up to 32 MB), so the process's resident size only ever grows, task after task.
-``release_free_memory`` hands the free heap back (``malloc_trim``): after 8 quick NAFNet training
-steps and restoring 17 frames and windows through ONNX Runtime, deleting everything left the process
-at 1.72 GB and trimming brought it to 0.93 GB (from 0.84 GB at the start; 2026-11-27). The runner
+``release_free_memory`` hands the free heap back (``malloc_trim``), which brings a process that has
+trained and run networks and deleted them back to near its starting size (docs/history.md). The runner
 calls it after each task, the evaluation after each stage of a restorer (its restore, its PSNR/SSIM,
-each read chain): a fresh quick gp run, trimmed only between restorers, reached 8.1-8.4 GiB resident
-at the end of each restorer's step while only 5.3-5.9 GB was in use (traced with ``mallinfo2``).
+each read chain): trimmed only between restorers, a quick run held gigabytes of freed heap at the end
+of each restorer's step (docs/costs.md, traced with ``mallinfo2``).
 A fixed mmap threshold (``M_MMAP_THRESHOLD`` 4 MiB, so that freed tensors unmap at once) was the
-other way; it made a quick NAFNet's inference 8 % and its training steps 50-75 % slower (page faults
-on every large tensor), so it is not used.
+other way; it made a quick NAFNet's inference and, far more, its training steps slower (page faults
+on every large tensor; docs/history.md), so it is not used.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """EasyOCR's weights are loaded with ``weights_only=True``: a pickle that would run code when
-unpickled, put where the recognizer's weights belong, is refused and never runs (issue 38, 14)."""
+unpickled, put where the recognizer's weights belong, is refused and never runs."""
 
 from __future__ import annotations
 

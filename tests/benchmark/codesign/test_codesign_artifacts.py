@@ -1,4 +1,4 @@
-"""Fault injection (issue 13, probe 5): every artifact that co-design, the adversary's pre-training and
+"""Fault injection: every artifact that co-design, the adversary's pre-training and
 the clean utility pre-training write under the cache is checked on read; a truncated one is reported
 with its path and rebuilt, and the rebuilt run equals a clean one (all of it is seeded on the CPU)."""
 

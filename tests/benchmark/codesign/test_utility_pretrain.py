@@ -1,4 +1,4 @@
-"""The clean utility pre-training and its shipped weights (issue 14, item 1).
+"""The clean utility pre-training and its shipped weights.
 
 The shipped-weights test re-measures, on CPU, the mIoU that `python -m benchmark pretrain`
 recorded for the first val scenes (its `check` block) and fails on a drift above TOLERANCE; the

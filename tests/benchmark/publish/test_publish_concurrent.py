@@ -1,4 +1,4 @@
-"""Two publishes into one leaderboard at once keep both runs' rows (issue 38, item 2): publishing
+"""Two publishes into one leaderboard at once keep both runs' rows: publishing
 holds the leaderboard folder's lock from reading the stored entry to rendering the pages, and a
 render alone waits for it."""
 

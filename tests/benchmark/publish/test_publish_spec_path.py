@@ -1,6 +1,6 @@
 """Publishing a lens given as a spec path (`--lens lenses/specs/defocus.toml ... --publish`) writes its
-entry, copies its pictures under file-safe names and re-renders the pages (issue 38, item 5: the
-width chart's name was built from the raw path, so rendering never happened)."""
+entry, copies its pictures under file-safe names and re-renders the pages (the
+width chart's name was once built from the raw path, so rendering never happened)."""
 
 from __future__ import annotations
 
@@ -49,6 +49,6 @@ def test_a_spec_path_lens_is_published_and_rendered(tmp_path, lens):
     assert sorted(p.name for p in (board / "samples").iterdir()) == [f"{safe}__smoke.png"]
     assert f"(samples/{safe}__smoke.png)" in (board / "charts.md").read_text()
     assert f"samples/{safe}__smoke.png" in (board / "index.html").read_text()
-    # The page and the tables can be served by another user (issue 38, item 11).
+    # The page and the tables can be served by another user.
     for written in (path, board / "README.md", board / "index.html"):
         assert stat.S_IMODE(written.stat().st_mode) == 0o644, written

@@ -1,4 +1,4 @@
-"""Run charts legible at page width (issue 40): each run chart rendered with a crowded case (20 chains,
+"""Run charts legible at page width: each run chart rendered with a crowded case (20 chains,
 5 lenses; 12 restorers) keeps its legends, labels and notes off the data and off each other, uses fonts
 readable at ~1000 px, draws at most MAX_CHAINS lines per panel with colours that never repeat within
 a panel and error bars from the data; the sample grid shows each image's own scores; the plate

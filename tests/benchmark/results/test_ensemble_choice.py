@@ -1,4 +1,4 @@
-"""The standard-ensemble choice (issue 37, item 1): removal effects are exact, and the proposed
+"""The standard-ensemble choice: removal effects are exact, and the proposed
 ensemble constant and docs/ensemble.md are what the rule selects on the published quick entries."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """A malformed leaderboard entry is refused with its file, its field and what would be valid, instead of
-rendering wrong or failing inside the renderer (issue 38, item 7)."""
+rendering wrong or failing inside the renderer."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Lens and attacker names (and plugins' error messages) are inert in the Markdown tables, as they are
-on the web page (issue 38, item 13): the leaderboard README, the project README's table, a run's table.md."""
+on the web page: the leaderboard README, the project README's table, a run's table.md."""
 
 from __future__ import annotations
 

@@ -48,7 +48,7 @@ def test_an_attacker_past_its_budget_is_a_failed_row_error():
 
 def test_a_native_call_that_overruns_the_budget_is_named_in_the_message():
     """The budget is a signal: one long C call (here a key derivation that holds no Python code) runs
-    to its end first, and the message says how long the step really took and why (issue 38, 10)."""
+    to its end first, and the message says how long the step really took and why."""
     import hashlib
     t0 = time.perf_counter()
     hashlib.pbkdf2_hmac("sha256", b"p", b"s", 20_000)

@@ -1,4 +1,4 @@
-"""Issue 13: the torch/EasyOCR warnings every run printed are silenced, each by message and module;
+"""The torch/EasyOCR warnings every run used to print are silenced, each by message and module;
 reading a plate with EasyOCR (a fresh process: the Reader, and its warnings, come once per process)
 prints none of them, while the same read without the filters prints each (so the check can fail)."""
 

@@ -1,4 +1,4 @@
-"""Fault injection (issue 13): a broken attacker, a corrupt cache or a second run never costs results.
+"""Fault injection: a broken attacker, a corrupt cache or a second run never costs results.
 
 Each probe has its own test; the expensive runs are shared module fixtures (smoke profile).
 """

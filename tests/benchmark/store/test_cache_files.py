@@ -1,5 +1,5 @@
-"""What the cache's files look like to other users and what it does with symbolic links (issue 38,
-items 11 and 12): modes follow the umask, a symlinked lock is refused, a symlinked root is followed."""
+"""What the cache's files look like to other users and what it does with symbolic links:
+modes follow the umask, a symlinked lock is refused, a symlinked root is followed."""
 
 import os
 import re
