@@ -135,7 +135,8 @@ def collect(planned: list[Task], results: dict[str, TaskResult], directory: Path
         out.settings.update(result.settings)
         out.plates.extend(result.plates)
         out.pictures.extend(directory / task.key / name for name in result.meta.get("pictures", []))
-        if task.kind == "lens" and task.lens not in out.lens_info:
+        # A lens task that failed gives failed rows and no lens facts; the lens's other rows still count.
+        if task.kind == "lens" and task.lens not in out.lens_info and "spec" in result.meta:
             out.lens_info[task.lens] = {k: result.meta[k] for k in ("coefficients_um", "spec")}
         if task.kind == "bound" and task.lens not in out.bound_curves and "curve" in result.meta:
             curve = result.meta["curve"]

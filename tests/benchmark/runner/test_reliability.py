@@ -14,6 +14,8 @@ import pytest
 
 from benchmark.results.schema import read_results
 
+pytestmark = pytest.mark.slow  # most tests run `python -m benchmark run` in a subprocess
+
 # Timing, and provenance that names when and at which commit rather than what was measured.
 TIMING = {"fit_s", "images_per_s", "wall_s", "date", "git_commit"}
 
@@ -335,3 +337,27 @@ def test_corrupt_task_results_are_reported_and_rebuilt(shared_cache_runs, tmp_pa
         assert str(path) in proc.stderr  # reported with its path
         json.loads(path.read_text())     # and rebuilt
     assert measured(tmp_path / "again") == measured(outs[0])
+
+
+@pytest.mark.slow
+def test_a_lens_task_that_fails_gives_that_lens_failed_rows_and_the_run_completes(tmp_path, monkeypatch):
+    """A lens whose own task raises (a spec that runs out of memory, say) must not end the run while its
+    partial results are written: the other lens's rows are complete and results.json is written."""
+    import benchmark
+    from benchmark.runner import tasks
+
+    real = tasks._KINDS["lens"]
+
+    def lens_task(task, cfg, staging):
+        if task.lens == "defocus":
+            raise MemoryError("the lens task of defocus ran out of memory")
+        return real(task, cfg, staging)
+
+    monkeypatch.setitem(tasks._KINDS, "lens", lens_task)
+    monkeypatch.setenv("PLB_CACHE", str(tmp_path / "cache"))
+    benchmark.run(lenses=["ideal", "defocus"], attacks=["identity"], profile="smoke", out=tmp_path / "out")
+    rows = read_results(tmp_path / "out" / "results.json").rows
+    lens_rows = {r.lens: r for r in rows if r.kind == "lens"}
+    assert not lens_rows["defocus"].ok and "ran out of memory" in lens_rows["defocus"].error.message
+    assert lens_rows["ideal"].ok
+    assert [r.attack for r in rows if r.lens == "ideal" and r.kind == "restorer" and r.ok] == ["identity"]
