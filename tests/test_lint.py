@@ -1,8 +1,12 @@
-"""ruff over the tree and mypy over the physics and attacker layers, with the rules in pyproject.toml."""
+"""ruff over the tree and mypy over the common, physics and attacker layers, with the rules in pyproject.toml."""
 
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.slow  # ruff and mypy in subprocesses (mypy takes a while)
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -23,6 +27,6 @@ def test_ruff_would_catch_an_unused_import(tmp_path):
     assert proc.returncode == 1 and "F401" in proc.stdout
 
 
-def test_mypy_passes_on_lenses_and_attacks():
-    proc = run("mypy", "lenses", "attacks")
+def test_mypy_passes_on_common_lenses_and_attacks():
+    proc = run("mypy", "common", "lenses", "attacks")
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]

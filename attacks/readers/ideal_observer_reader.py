@@ -32,7 +32,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from attacks.base import FitContext, PlateRead, ReadHints, Reader, ThreatModel
+from attacks.base import FitContext, FitReport, PlateRead, ReadHints, Reader, ThreatModel
 from common.plate_render import PLATE_FORMAT, format_alphabets, plate_font, render_plate
 from lenses.raw_likelihood import raw_mean_electrons
 from lenses.sensor import bayer_masks
@@ -73,7 +73,7 @@ class IdealObserverReader(Reader):
                     "to model its noise, and this lens has none")
         return None
 
-    def fit(self, ctx: FitContext) -> None:
+    def fit(self, ctx: FitContext) -> FitReport:
         """Take the lens's PSF, gain and sensor constants, and the scenes' plate format (``ctx.plate_format``)."""
         lens = ctx.lens
         if lens is None:  # skip_reason says so; fit may be called without asking it
@@ -88,6 +88,7 @@ class IdealObserverReader(Reader):
         self._camera = {"psf": psf, "electrons_per_unit": gain * sensor.full_well_e,
                         "read_noise_e": sensor.read_noise_e, "electrons_per_level": sensor.full_well_e / levels,
                         "levels": levels}
+        return FitReport()
 
     def describe(self) -> dict[str, Any]:
         return {**super().describe(), "beam": self.beam, "max_sweeps": self.max_sweeps,

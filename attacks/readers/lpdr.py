@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from attacks.base import FitContext, PlateRead, ReadHints, Reader, ThreatModel, box_iou
+from attacks.base import FitContext, FitReport, PlateRead, ReadHints, Reader, ThreatModel, box_iou
 from attacks.readers.plates.detect_craft import detect_craft
 from attacks.readers.plates.detect_opencv import detect_opencv
 from attacks.readers.plates.easyocr_models import load_easyocr
@@ -62,14 +62,14 @@ class PlateReaderBase(Reader):
 
     Args:
         plate_detector: "opencv" (morphology, the default) or "craft" (EasyOCR's pretrained text
-            detector; ~10x slower per image on 2 CPU cores, see README; registered as lpdr-craft).
+            detector; about 10x slower per image on the CPU; registered as lpdr-craft).
         vehicle_margin: Each vehicle box grows by this fraction of its size on every side.
         plate_band_top: Only the part of the (grown) vehicle box below this fraction of its
             height is searched: plates sit on bumpers, in the lower part of a vehicle.
         min_vehicle_width_px: Narrower vehicles are skipped: an EU plate is at most ~0.29 of a
             car's width, so a 100 px car carries a plate under 29 px: english_g2 reads none of those
-            on sharp scenes (and the runner does not score plates under 32 px, benchmark/plates.py);
-            skipping them saves OCR time.
+            on sharp scenes, so skipping them saves OCR time (the runner scores plates from 8 px and
+            pools them from 24 px: ``benchmark.results.plate_scoring``).
         plate_format: Plate syntax known to the attacker ('L' letter, 'D' digit) used to resolve
             letter / digit look-alikes in reads of that length; None to read without it.
         min_chars: Reads with fewer characters are dropped (not a plate).
@@ -103,11 +103,12 @@ class PlateReaderBase(Reader):
         self.ocr_cache_hits = 0
         self._ocr: Any = None
 
-    def fit(self, ctx: FitContext) -> None:
+    def fit(self, ctx: FitContext) -> FitReport:
         """Load EasyOCR (offline, once per process); nothing is trained."""
         self.gpu = ctx.device.startswith("cuda")
         self._ocr = None
         self._ocr = self.ocr
+        return FitReport()
 
     @property
     def ocr(self) -> Any:
@@ -252,13 +253,8 @@ class Lpdr(PlateReaderBase):
 
         Why half size by default: only vehicles at least ``min_vehicle_width_px`` (100) wide are
         searched, and they are still >= 50 px wide at half size, where the segmentation finds them as
-        well. Measured on the quick plate windows (seed 0, 201 readable plates per condition, the
-        shipped nets, 2026-11-24): reads at full / half size were sharp 78 / 78, os sensor image with
-        its own net 30 / 28, os after Wiener 38 / 37, gp 0 / 0 (sensor, and white-balanced); over the
-        four non-zero conditions 5 plates read only at full size and 2 only at half size (McNemar
-        p = 0.45: no difference this sample can tell), while the vehicle stage took 4.9-6.5x less
-        time (41.9 s -> 8.5 s per 201 windows on sharp ones). ``vehicle_scale=1`` gives the full-size
-        segmentation."""
+        well: it reads the same plates (no difference McNemar can tell) for a vehicle stage several
+        times faster (docs/modelling.md). ``vehicle_scale=1`` gives the full-size segmentation."""
         if not 0.0 < vehicle_scale <= 1.0:
             raise ValueError(f"vehicle_scale must be in (0, 1], got {vehicle_scale}")
         super().__init__(**options)

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from attacks.base import FitContext, Restorer, ThreatModel
+from attacks.base import FitContext, FitReport, Restorer, ThreatModel
 from attacks.restorers.identity import divide_by_gain
 from lenses.sensor import mosaic
 
@@ -100,12 +100,13 @@ class DemosaicVNG(Restorer):
         self._gain: Tensor | None = None
         self._adc_bits = 10
 
-    def fit(self, ctx: FitContext) -> None:
+    def fit(self, ctx: FitContext) -> FitReport:
         """Store the sensor's gain (3,) and ADC depth (from the lens spec when it has one)."""
         assert ctx.lens is not None  # guaranteed by the `requires` check that wraps fit
         self._gain = ctx.lens.gain().detach().cpu()
         sensor_spec = getattr(getattr(ctx.lens, "spec", None), "sensor", None)
         self._adc_bits = int(getattr(sensor_spec, "adc_bits", 10))
+        return FitReport()
 
     def restore(self, sensor: Tensor) -> Tensor:
         """Scene estimate from ``sensor`` (B, 3, H, W) in [0, 1]: (B, 3, H, W) in [0, 1]."""

@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 
 from torch import Tensor
 
-from attacks.base import FitContext, Restorer, ThreatModel
+from attacks.base import FitContext, FitReport, Restorer, ThreatModel
 
 __all__ = ["Identity", "divide_by_gain"]
 
@@ -47,10 +47,11 @@ class Identity(Restorer):
     def __init__(self) -> None:
         self._gain: Tensor | None = None
 
-    def fit(self, ctx: FitContext) -> None:
+    def fit(self, ctx: FitContext) -> FitReport:
         """Store the sensor's per-channel gain ``ctx.lens.gain()`` (3,)."""
         assert ctx.lens is not None  # guaranteed by the `requires` check that wraps fit
         self._gain = ctx.lens.gain().detach().cpu()
+        return FitReport()
 
     def restore(self, sensor: Tensor) -> Tensor:
         """White-balanced ``sensor``: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""

@@ -29,7 +29,7 @@ from typing import Any, ClassVar
 import torch
 from torch import Tensor
 
-from attacks.base import FitContext, Restorer, ThreatModel
+from attacks.base import FitContext, FitReport, Restorer, ThreatModel
 from attacks.training.degradations import degrade
 from attacks.restorers.gray_world import gray_world_balance
 from attacks.networks.nafnet import NAFNet, load_nafnet_checkpoint
@@ -57,9 +57,8 @@ class NafnetGeneric(Restorer):
         checkpoint_arch: ``NAFNet`` keyword arguments of the checkpoint (None: GoPro width 32).
         backend: Inference backend: "onnx", "auto" or "torch" (``attacks.backends.onnx_runtime``).
             ONNX Runtime by default (torch where the network is not on the CPU or the export
-            fails): on 2 cores it ran the folded quick NAFNet about 2.5x as fast as torch at 512 x 1024, while
-            "auto"'s one-image probe once picked torch (0.84 against 1.30 s), which then restored at
-            0.37 images/s against 0.77 (fresh quick gp runs, 2026-11-27).
+            fails): it runs the folded quick NAFNet faster than torch, and "auto"'s one-image probe
+            has picked the slower one (docs/modelling.md, docs/history.md).
         use_shipped: Load the package's shipped weights when their key matches (False: train or
             load from the cache, as ``pretrain-attacker`` does to make them).
 
@@ -90,7 +89,7 @@ class NafnetGeneric(Restorer):
         self.engine: InferenceEngine | None = None
         self._checkpoint_sha256: str | None = None
 
-    def fit(self, ctx: FitContext) -> None:
+    def fit(self, ctx: FitContext) -> FitReport:
         """Load the checkpoint, or train on generic degradations of ``ctx.train_pairs``' sharp
         crops (loading from ``ctx.artifacts`` when cached)."""
         if self.checkpoint is not None:
@@ -114,6 +113,7 @@ class NafnetGeneric(Restorer):
             self.budget = budget
         self.network = model.to(ctx.device).eval()
         self.engine = InferenceEngine(fold_for_inference(self.network), self.backend, fallback=True)
+        return FitReport()
 
     def cache_key(self, ctx: FitContext) -> dict[str, Any]:
         """The configuration its trained weights are cached (and shipped) under: budget, training crops, seed."""

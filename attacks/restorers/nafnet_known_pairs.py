@@ -15,7 +15,7 @@ from typing import Any, ClassVar
 import torch
 from torch import Tensor
 
-from attacks.base import FitContext, Restorer, ThreatModel
+from attacks.base import FitContext, FitReport, Restorer, ThreatModel
 from attacks.networks.nafnet import NAFNet
 from attacks.networks.nafnet_folded import fold_for_inference
 from attacks.backends.onnx_runtime import InferenceEngine, check_backend
@@ -39,9 +39,8 @@ class NafnetKnownPairs(Restorer):
         backend: Inference backend, "onnx", "auto" (time torch and ONNX Runtime once, keep the
             faster) or "torch" (``attacks.backends.onnx_runtime``).
             ONNX Runtime by default (torch where the network is not on the CPU or the export
-            fails): on 2 cores it ran the folded quick NAFNet about 2.5x as fast as torch at 512 x 1024, while
-            "auto"'s one-image probe once picked torch (0.84 against 1.30 s), which then restored at
-            0.37 images/s against 0.77 (fresh quick gp runs, 2026-11-27).
+            fails): it runs the folded quick NAFNet faster than torch, and "auto"'s one-image probe
+            has picked the slower one (docs/modelling.md, docs/history.md).
         use_shipped: Load the package's weights shipped for exactly this lens, budget, training pairs
             and seed (``attacks.training.shipped_weights``; made with the lens by ``python -m benchmark
             ship-lens``) when they exist; False trains or loads from the cache.
@@ -67,7 +66,7 @@ class NafnetKnownPairs(Restorer):
         self.network: NAFNet | None = None
         self.engine: InferenceEngine | None = None
 
-    def fit(self, ctx: FitContext) -> None:
+    def fit(self, ctx: FitContext) -> FitReport:
         """Train (or load from ``ctx.artifacts``) a NAFNet on ``ctx.train_pairs``."""
         assert ctx.lens is not None and ctx.train_pairs is not None  # checked by `requires`
         budget = RestorerBudget.from_budget(ctx.budget)
@@ -82,6 +81,7 @@ class NafnetKnownPairs(Restorer):
         self.budget = budget
         self.network = model.to(ctx.device).eval()
         self.engine = InferenceEngine(fold_for_inference(self.network), self.backend, fallback=True)
+        return FitReport()
 
     def cache_key(self, ctx: FitContext) -> dict[str, Any]:
         """The configuration its weights are cached (and shipped) under: budget, lens, training pairs, seed."""

@@ -30,7 +30,7 @@ from scipy.fft import next_fast_len
 from torch import Tensor
 
 from attacks.backends import real_fft
-from attacks.base import FitContext, Restorer, ThreatModel
+from attacks.base import FitContext, FitReport, Restorer, ThreatModel
 from attacks.backends.real_fft import OtfCache, circular_filter, image_chunks
 from attacks.restorers.wiener_known_psf import edge_taper
 
@@ -155,13 +155,13 @@ class RichardsonLucyKnownPSF(Restorer):
         self._psf: OtfCache | None = None
         self._gain: Tensor | None = None
 
-    def fit(self, ctx: FitContext) -> None:
+    def fit(self, ctx: FitContext) -> FitReport:
         """Measure the PSF and gain; choose the iteration count on ``ctx.train_pairs``."""
         assert ctx.lens is not None  # checked by `requires`
         self._psf = OtfCache(ctx.lens.psf().detach())
         self._gain = ctx.lens.gain().detach()
         if self._fixed is not None:
-            return
+            return FitReport()
         if ctx.train_pairs is None:
             raise ValueError(f"{self.name}: choosing the iteration count needs FitContext.train_pairs; "
                              "or pass iterations=N")
@@ -179,6 +179,7 @@ class RichardsonLucyKnownPSF(Restorer):
             n_images += sensor.shape[0]
         self.ladder_psnr_db = {k: total / max(n_images, 1) for k, total in totals.items()}
         self.iterations = max(self.ladder_psnr_db, key=lambda k: self.ladder_psnr_db[k])
+        return FitReport()
 
     def _divide_gain(self, sensor: Tensor) -> Tensor:
         assert self._gain is not None

@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 
 from torch import Tensor, nn
 
-from attacks.base import FitContext, Restorer, ThreatModel
+from attacks.base import FitContext, FitReport, Restorer, ThreatModel
 from attacks.backends.onnx_runtime import InferenceEngine, check_backend
 
 __all__ = ["TrainingAdversary"]
@@ -26,11 +26,8 @@ class TrainingAdversary(Restorer):
     Args:
         backend: Inference backend: "onnx", "auto" or "torch" (``attacks.backends.onnx_runtime``).
             ONNX Runtime by default (torch where the network is not on the CPU or the export
-            fails). On 2 cores it restored the quick RED10 on 201 plate windows of 39 sizes in
-            34.5 s against 48.5 s in torch; "auto"'s one-image probe once picked torch (0.42
-            against 0.69 s), and RED10 in torch on the windows then set a fresh quick gp run's
-            peak (9.06 GiB, against 6.07 GiB for the same evaluation through ONNX Runtime;
-            2026-11-27).
+            fails): it restores the quick RED10's plate windows faster than torch and at a lower
+            peak, and "auto"'s one-image probe has picked torch (docs/modelling.md, docs/history.md).
     """
 
     name: ClassVar[str] = "training-adversary"
@@ -49,7 +46,7 @@ class TrainingAdversary(Restorer):
             return f"{name} was not co-designed with a deblurring adversary (FitContext.adversary is None)"
         return None
 
-    def fit(self, ctx: FitContext) -> None:
+    def fit(self, ctx: FitContext) -> FitReport:
         """Take a frozen copy of ``ctx.adversary``; a later step of co-design cannot change the
         attacker being scored."""
         adversary: nn.Module | None = ctx.adversary
@@ -57,6 +54,7 @@ class TrainingAdversary(Restorer):
         network = copy.deepcopy(adversary).requires_grad_(False).eval()
         self._network = type(adversary).__name__
         self.engine = InferenceEngine(network, self.backend, fallback=True)
+        return FitReport()
 
     def restore(self, sensor: Tensor) -> Tensor:
         """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""

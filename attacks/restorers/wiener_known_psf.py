@@ -46,7 +46,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from attacks.base import FitContext, Restorer, ThreatModel
+from attacks.base import FitContext, FitReport, Restorer, ThreatModel
 from attacks.backends.real_fft import OtfCache, circular_filter, image_chunks, irfft2, rfft2
 
 __all__ = [
@@ -310,11 +310,12 @@ class WienerKnownPSF(Restorer):
         self._psf: OtfCache | None = None
         self._gain: Tensor | None = None
 
-    def fit(self, ctx: FitContext) -> None:
+    def fit(self, ctx: FitContext) -> FitReport:
         """Measure the camera: store ``ctx.lens.psf()`` (3, K, K) and ``ctx.lens.gain()`` (3,)."""
         assert ctx.lens is not None  # guaranteed by the `requires` check that wraps fit
         self._psf = OtfCache(ctx.lens.psf().detach())
         self._gain = ctx.lens.gain().detach()
+        return FitReport()
 
     def restore(self, sensor: Tensor) -> Tensor:
         """Scene estimate from ``sensor`` (B, 3, H, W) in [0, 1]: (B, 3, H, W) in [0, 1]."""

@@ -155,9 +155,8 @@ def train_restorer(model: nn.Module, next_batch: Callable[[torch.Generator], tup
     Returns:
         The loss (negative PSNR, dB) of every step.
 
-    The steps run with the weights in channels-last layout (a quick NAFNet step 0.34 -> 0.27 s on 2
-    cores, 2026-11-29: the convolutions' backward no longer copies activations between layouts; the
-    sums' order, so float rounding, differs); the model is handed back in the default layout, so it
+    The steps run with the weights in channels-last layout, so the convolutions' backward copies no
+    activations between layouts (faster: docs/history.md; the sums' order, so float rounding, differs); the model is handed back in the default layout, so it
     infers exactly as the same weights loaded from the cache do.
     """
     model.to(device).to(memory_format=TRAINING_LAYOUT).train()

@@ -73,12 +73,8 @@ def check_reads(name: str, reads: object, n_images: int) -> list[list[attacks.Pl
 
 
 # Whole frames go to a restorer a few at a time: a network's activations grow with the pixels of its
-# batch. RED10 (width 32) on 512 x 1024 frames raised the resident peak by 2.2 GiB in batches of 8,
-# 0.6 GiB in batches of 2 and 0.3 GiB one by one, at the same speed (2.9, 2.8, 2.7 s for 8 frames, 2
-# threads; 2026-11-26); in a quick run it set the process's peak (12.0 GiB), though an evaluation alone
-# in its own process peaked only 0.17 GiB lower with it (5.53 -> 5.36 GiB). Plate windows (256 x 256 to
-# 512 x 704 in quick) are bounded the same way: RED10 on 8 windows of 512 x 576 set a fresh quick gp
-# run's peak (9.4 GiB, 2026-11-27).
+# batch. Two quick frames a call raise the resident peak far less than eight, at the same speed, and
+# plate windows (256 x 256 to 512 x 704 in quick) are bounded the same way (docs/history.md).
 RESTORE_PIXELS_PER_BATCH = 2 * 512 * 1024
 
 

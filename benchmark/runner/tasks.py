@@ -54,7 +54,7 @@ log = logging.getLogger(__name__)
 
 BOUND_CURVE_WIDTHS_PX = (4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192)
 # The plate set stops drawing frames here even short of its target (a scene set with few plates).
-# The plate set fills every width bin below this (issue: >= 50 plates per bin from 8 to 64 px).
+# The plate set fills every width bin below this to its full quota (>= 50 plates per bin from 8 to 64 px).
 QUOTA_BELOW_PX = 64
 RESULT_FILE = "result.json"
 

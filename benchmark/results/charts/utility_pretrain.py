@@ -21,7 +21,7 @@ def pretrain_figure(provenance: dict[str, Any]) -> Figure:
     ax, bars = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.1, 1]})
     steps = [p["step"] for p in curve]
     ax.plot(steps, [p["miou"] for p in curve], "o-", color="tab:blue", label="sharp val mIoU")
-    ax.axhline(TARGET_MIOU, color="grey", ls=":", lw=1, label=f"issue 14 target {TARGET_MIOU:.2f}")
+    ax.axhline(TARGET_MIOU, color="grey", ls=":", lw=1, label=f"target {TARGET_MIOU:.2f}")
     ax.set_xlabel("training step")
     ax.set_ylabel("mIoU")
     ax.set_ylim(0, max(TARGET_MIOU + 0.1, max(p["miou"] for p in curve) + 0.05))

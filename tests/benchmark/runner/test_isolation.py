@@ -1,4 +1,4 @@
-"""Issue 38 (items 1, 3, 4, 6): no attacker reaches another's inputs or outputs, no plugin ends the run
+"""No attacker reaches another's inputs or outputs, no plugin ends the run
 with nothing written, a lens that fails takes nothing else with it, and no cached picture is reused
 or published unchecked.
 
