@@ -8,9 +8,13 @@ every scored plate gets an outcome, so every reader has an accuracy-against-widt
 READABLE_MIN_WIDTH_PX: the smallest width bin where the strongest reader reads at least half of
 the sharp plates (``benchmark.results.readable_start``, measured and shipped with the package).
 A read detects a plate when its box overlaps the plate box with IoU >= MATCH_IOU or its centre
-falls inside it; the plate counts as read when the best-matching read's text equals the
-ground truth exactly (case and spaces ignored). Character error rate: Levenshtein distance
-between the best read (or the empty string) and the truth, over the truth's length.
+falls inside it. One read per plate counts, as a detector pipeline is judged: of the reads that
+detect it, the reader's own best-scored one (the first of equal scores); the plate counts as read when
+that read's text equals the ground truth exactly (case and spaces ignored), and the other reads on it
+count for nothing, so many guesses score no better than the one the reader trusts most. Character
+error rate: Levenshtein distance between that read (or the empty string) and the truth, over the
+truth's length. A reader gives at most MAX_READS_PER_IMAGE reads per image, each at most
+MAX_READ_CHARS characters (``check_read_limits``); past either its row fails.
 """
 
 from __future__ import annotations
@@ -32,6 +36,9 @@ READABLE_MIN_WIDTH_PX = measured_start(WIDTH_BINS_PX)
 LEGACY_READABLE_MIN_WIDTH_PX = 32
 READABLE_MIN_VISIBLE = 0.99
 MATCH_IOU = 0.3
+# A plate window holds one scored plate and a quick frame a few dozen; plate strings are a few characters.
+MAX_READS_PER_IMAGE = 64
+MAX_READ_CHARS = 32
 
 
 @dataclass(frozen=True)
@@ -87,15 +94,34 @@ def _matches(read: PlateRead, plate: Plate) -> bool:
     return iou(read.box_xyxy, plate.box_xyxy) >= MATCH_IOU or (x0 <= cx < x1 and y0 <= cy < y1)
 
 
+def check_read_limits(reads: list[PlateRead]) -> str | None:
+    """Why one image's reads break the limits (too many, a text too long, a score outside [0, 1] or a box
+    that is not four finite numbers), or None when they keep them."""
+    if len(reads) > MAX_READS_PER_IMAGE:
+        return f"{len(reads)} reads of one image, more than MAX_READS_PER_IMAGE = {MAX_READS_PER_IMAGE}"
+    for r in reads:
+        if not isinstance(r.text, str) or len(r.text) > MAX_READ_CHARS:
+            shown = f"{len(r.text)} characters" if isinstance(r.text, str) else type(r.text).__name__
+            return f"a read's text is {shown}; at most MAX_READ_CHARS = {MAX_READ_CHARS} characters are scored"
+        if not (isinstance(r.score, (int, float)) and 0.0 <= r.score <= 1.0):
+            return f"a read's score is {r.score!r:.40}; scores lie in [0, 1]"
+        box = r.box_xyxy
+        if (not isinstance(box, tuple) or len(box) != 4
+                or not all(isinstance(v, (int, float)) and np.isfinite(v) for v in box)):
+            return f"a read's box is {box!r:.60}; boxes are four finite numbers (x0, y0, x1, y1)"
+    return None
+
+
 def score_scene(reads: list[PlateRead], scene: Scene) -> list[PlateOutcome]:
-    """Outcomes for every scored plate of one scene (each read is used for one plate at most)."""
+    """Outcomes for every scored plate of one scene: each plate takes the best-scored of the reads
+    that detect it and that no earlier plate took (each read is used for one plate at most)."""
     outcomes, used = [], set()
     for plate in scene.plates:
         if not scored(plate):
             continue
         truth = normalise(plate.text)
         candidates = [(i, r) for i, r in enumerate(reads) if i not in used and _matches(r, plate)]
-        best = min(candidates, key=lambda ir: (levenshtein(normalise(ir[1].text), truth), -ir[1].score), default=None)
+        best = max(candidates, key=lambda ir: (ir[1].score, -ir[0]), default=None)
         text = ""
         if best is not None:
             used.add(best[0])

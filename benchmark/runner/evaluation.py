@@ -25,7 +25,7 @@ from benchmark.runner.isolation import attempt, describe, own_context, private
 from benchmark.runner.intervals import plate_intervals, scene_intervals
 from benchmark.results.metrics import psnr, ssim
 from benchmark.runner.diagnostics.native_memory import release_free_memory
-from benchmark.results.plate_scoring import PlateOutcome, pooled, readable, score_scene, summarise
+from benchmark.results.plate_scoring import PlateOutcome, check_read_limits, pooled, readable, score_scene, summarise
 from benchmark.runner.rows import RowBuilder, plate_units, scene_units
 from benchmark.runner.config import RunConfig
 from benchmark.scenes import Scene
@@ -69,6 +69,9 @@ def check_reads(name: str, reads: object, n_images: int) -> list[list[attacks.Pl
     for per_image in reads:
         if not isinstance(per_image, list) or not all(isinstance(r, attacks.PlateRead) for r in per_image):
             raise OutputError(f"{name}.read must return lists of attacks.PlateRead, got {per_image!r:.120}")
+        broken = check_read_limits(per_image)
+        if broken is not None:
+            raise OutputError(f"{name}.read returned {broken}")
     return reads
 
 

@@ -102,3 +102,55 @@ def test_finite_mean_never_turns_nan_into_a_score():
     with pytest.raises(ValueError, match="NaN"):
         finite_mean(torch.tensor([20.0, math.nan]))
     assert finite_mean(torch.tensor([20.0, 30.0])) == 25.0
+
+
+def _read(text, score, box=(10.0, 10.0, 42.0, 18.0)):
+    return attacks.PlateRead(text, box, score)
+
+
+@pytest.mark.parametrize("reads, text", [
+    ([_read("AB123CD", 0.5)] * 65, "65 reads of one image, more than MAX_READS_PER_IMAGE = 64"),
+    ([_read("A" * 1_000_000, 0.5)], "a read's text is 1000000 characters; at most MAX_READ_CHARS = 32"),
+    ([_read("AB123CD", 1.5)], "a read's score is 1.5; scores lie in [0, 1]"),
+    ([_read("AB123CD", float("nan"))], "a read's score is nan"),
+    ([_read("AB123CD", 0.5, (0.0, 0.0, float("inf"), 1.0))], "a read's box is (0.0, 0.0, inf, 1.0); boxes are four finite"),
+])
+def test_reads_past_the_limits_fail_the_row_naming_the_limit(reads, text):
+    with pytest.raises(OutputError, match=re.escape(f"echo.read returned {text}")):
+        check_reads("echo", [reads], 1)
+
+
+def _scene():
+    import numpy as np
+
+    from benchmark.scenes.records import Plate, Scene
+    plate = Plate("AB123CD", (10.0, 10.0, 42.0, 18.0), 0, 1.0)
+    return Scene(np.zeros((32, 64, 3), np.float32), np.zeros((32, 64), np.uint8), [plate], [], 0, "s")
+
+
+def test_one_read_per_plate_counts_the_readers_best_scored_one():
+    from benchmark.results.plate_scoring import score_scene
+    scene = _scene()
+    # The right text at a lower score than a wrong one does not count; at the higher score it does.
+    (hedged,) = score_scene([_read("XX999XX", 0.9), _read("AB123CD", 0.2)], scene)
+    assert not hedged.correct and hedged.read == "XX999XX" and hedged.cer == 1.0
+    (trusted,) = score_scene([_read("XX999XX", 0.2), _read("AB123CD", 0.9)], scene)
+    assert trusted.correct and trusted.cer == 0.0
+    # Of equal scores the first read counts, whatever the truth.
+    (first,) = score_scene([_read("XX999XX", 0.5), _read("AB123CD", 0.5)], scene)
+    assert first.read == "XX999XX"
+
+
+def test_many_guesses_score_as_the_one_the_reader_trusts_most():
+    import random
+
+    from benchmark.results.plate_scoring import levenshtein, score_scene
+    rng = random.Random(0)
+    alphabet = "ABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789"
+    guesses = ["".join(rng.choice(alphabet) for _ in range(7)) for _ in range(63)]
+    scene = _scene()
+    reads = [_read(g, 0.01 + 0.5 * rng.random()) for g in guesses] + [_read("AB123CD", 0.0)]
+    (many,) = score_scene(reads, scene)
+    top = max(reads, key=lambda r: r.score)
+    (one,) = score_scene([top], scene)
+    assert many == one and many.cer == levenshtein(top.text, "AB123CD") / 7
