@@ -15,7 +15,7 @@ from lenses.spec import LensSpec
 class Lens(torch.nn.Module):
     """Scene radiance (B,3,H,W) in [0,1] -> sensor image (B,3,H,W) in [0,1].
 
-    `coefficients_um` (6,) holds the Noll Zernike coefficients of the mask thickness in um of
+    `coefficients_um` (n,) holds the n Noll Zernike coefficients of the mask thickness in um of
     glass; it is a trainable parameter when the spec declares bounds. Grid sizes are fixed at
     construction (from the bounds for trainable masks), so nothing changes shape while training.
 

@@ -28,7 +28,7 @@ import torch
 from scipy.fft import next_fast_len
 
 from lenses.materials import refractive_index
-from lenses.spec import N_ZERNIKE, LensSpec, LensSpecError
+from lenses.spec import LensSpec, LensSpecError
 from lenses.zernike import max_gradient, zernike_basis
 
 # Window searched beyond the geometric blur radius, in units of lambda F#. The diffraction rings of
@@ -82,12 +82,12 @@ def worst_case_coefficients(spec: LensSpec) -> np.ndarray:
 def phase_slope_terms(spec: LensSpec) -> np.ndarray:
     """Upper bound on |grad phase| (rad per unit normalised radius), per channel and term.
 
-    Shape (3, N_ZERNIKE + 1): the mask terms Z1..Z6 then the defocus term (|grad psi rho^2| <= 2|psi|).
+    Shape (3, n + 1): the n mask terms Z1..Zn then the defocus term (|grad psi rho^2| <= 2|psi|).
     Their sum per channel bounds the steepest phase slope (triangle inequality).
     """
     c = optical_constants(spec)
     coeffs = worst_case_coefficients(spec)
-    grads = np.array([max_gradient(j) for j in range(1, N_ZERNIKE + 1)])
+    grads = np.array([max_gradient(j) for j in range(1, len(coeffs) + 1)])
     mask_terms = np.array(c.phase_per_um)[:, None] * (coeffs * grads)[None, :]
     return np.concatenate([mask_terms, 2 * np.abs(np.array(c.defocus_rad))[:, None]], axis=1)
 
@@ -129,7 +129,7 @@ def pupil_samples_for(spec: LensSpec, psf_size_px: int) -> int:
     limit = spec.simulation.max_pupil_samples
     if n > limit:
         ch, term = np.unravel_index(np.argmax(terms), terms.shape)
-        what = ("the defocus (optics.focus_distance_m vs optics.object_distance_m)" if term == N_ZERNIKE
+        what = ("the defocus (optics.focus_distance_m vs optics.object_distance_m)" if term == terms.shape[1] - 1
                 else f"mask coefficient Z{term + 1} (mask.zernike_um[{term}] or its bound)")
         raise LensSpecError(
             f"{what} is too strong for the pupil grid: the phase slope reaches {slope.max():.0f} rad per unit"
@@ -204,7 +204,7 @@ def pixel_integration_matrix(psf_size_px: int, pitch_mm: float, period_mm: float
 
 
 class PixelEnergy(torch.autograd.Function):
-    """Mask coefficients (6,) float64 in um -> pixel energies (3, K, K) float64 through `PupilModel`'s
+    """Mask coefficients (n,) float64 in um -> pixel energies (3, K, K) float64 through `PupilModel`'s
     pupil phase, padded FFT and pixel integration, with a hand-written backward.
 
     Double precision throughout, though single would halve the cost and change the PSF by < 1e-6 in
@@ -254,7 +254,7 @@ class PupilModel(torch.nn.Module):
         self.geometry = geometry
         self.pitch_mm = spec.sensor.pixel_pitch_um * 1e-3
         n = geometry.pupil_samples
-        basis = zernike_basis(N_ZERNIKE, n, dtype=torch.float64)
+        basis = zernike_basis(len(spec.mask.zernike_um), n, dtype=torch.float64)
         coords = (torch.arange(n, dtype=torch.float64) + 0.5) / n * 2 - 1
         rho2 = coords[None, :] ** 2 + coords[:, None] ** 2
         self.register_buffer("basis", basis, persistent=False)
@@ -279,12 +279,12 @@ class PupilModel(torch.nn.Module):
         self._mft_kernels: dict[int, torch.Tensor] = {}
 
     def pupil_phase(self, coefficients_um: torch.Tensor) -> torch.Tensor:
-        """Pupil phase (3, N, N) in rad, float64, for coefficients (6,) in um of glass."""
+        """Pupil phase (3, N, N) in rad, float64, for coefficients (n,) in um of glass (n terms of the basis)."""
         thickness = torch.einsum("j,jyx->yx", coefficients_um.to(torch.float64), self.basis)
         return self.phase_per_um[:, None, None] * thickness + self.defocus[:, None, None] * self.rho2
 
     def pupil_field(self, coefficients_um: torch.Tensor) -> torch.Tensor:
-        """Complex pupil field U, (3, N, N), complex128, for coefficients (6,) in um of glass."""
+        """Complex pupil field U, (3, N, N), complex128, for coefficients (n,) in um of glass."""
         phase = self.pupil_phase(coefficients_um)
         return torch.polar(self.aperture.expand_as(phase), phase)
 

@@ -22,7 +22,10 @@ from lenses.materials import MATERIALS
 from common.plugins import suggest
 from lenses.zernike import zernike_noll
 
-N_ZERNIKE = 6
+N_ZERNIKE = 6  # terms of the built-in masks and of a random draw (Noll Z1..Z6)
+# A spec's mask may hold any number of Noll terms up to this (radial order 10); the pupil-sampling
+# guard (lenses.optics.pupil_samples_for) refuses any that the pupil grid cannot resolve.
+MAX_ZERNIKE = 66
 
 
 class LensSpecError(ValueError):
@@ -41,7 +44,7 @@ class OpticsSpec:
 
 @dataclass(frozen=True)
 class MaskSpec:
-    zernike_um: tuple[float, ...] = (0.0,) * N_ZERNIKE  # glass thickness, Noll Z1..Z6, RMS-normalised
+    zernike_um: tuple[float, ...] = (0.0,) * N_ZERNIKE  # glass thickness, Noll Z1..Zn, RMS-normalised
     bounds_um: tuple[tuple[float, float], ...] | None = None  # per-term bounds: declares a trainable mask
     random_seed: int | None = None  # draws zernike_um uniformly in [-random_amplitude_um, +] (Z2..Z6)
     random_amplitude_um: float = 0.0
@@ -188,15 +191,19 @@ def _mask(t: dict) -> MaskSpec:
         rng = np.random.default_rng(seed)
         coeffs = (0.0, *rng.uniform(-amplitude, amplitude, N_ZERNIKE - 1).tolist())
     elif "zernike_um" in t:
-        coeffs = _vector(t["zernike_um"], "mask.zernike_um", N_ZERNIKE)
+        coeffs = _vector(t["zernike_um"], "mask.zernike_um", None)
+        if not 1 <= len(coeffs) <= MAX_ZERNIKE:
+            raise LensSpecError(f"mask.zernike_um must hold 1 to {MAX_ZERNIKE} Noll coefficients (um of glass, "
+                                f"Z1 first), got {len(coeffs)}")
     else:
-        raise LensSpecError(f"missing field mask.zernike_um (a list of {N_ZERNIKE} Noll coefficients in um of glass)"
-                            " or mask.random_seed")
+        raise LensSpecError(f"missing field mask.zernike_um (a list of Noll coefficients in um of glass, Z1 first, "
+                            f"e.g. {N_ZERNIKE} of them) or mask.random_seed")
     bounds = None
     if "bounds_um" in t:
         raw = t["bounds_um"]
-        if not isinstance(raw, list) or len(raw) != N_ZERNIKE:
-            raise LensSpecError(f"mask.bounds_um must be a list of {N_ZERNIKE} [low, high] pairs in um")
+        if not isinstance(raw, list) or len(raw) != len(coeffs):
+            raise LensSpecError(f"mask.bounds_um must be a list of {len(coeffs)} [low, high] pairs in um, one per "
+                                "entry of mask.zernike_um")
         bounds = tuple(_vector(b, f"mask.bounds_um[{i}]", 2) for i, b in enumerate(raw))
         for i, ((lo, hi), c) in enumerate(zip(bounds, coeffs)):
             if not lo <= c <= hi:
@@ -215,19 +222,34 @@ def _mask(t: dict) -> MaskSpec:
 
 # Polar grid over the closed unit disk (rim included, where the relief peaks) for worst_sag_um.
 _RHO, _THETA = np.meshgrid(np.linspace(0.0, 1.0, 201), np.linspace(0.0, 2 * np.pi, 361))
+# Beyond this many corners of the box of bounds, worst_sag_um maximises over pairs of pupil points.
+MAX_SAG_CORNERS = 4096
+_RHO_PAIRS, _THETA_PAIRS = np.meshgrid(np.linspace(0.0, 1.0, 41), np.linspace(0.0, 2 * np.pi, 97))
 
 
 def worst_sag_um(bounds_um: tuple[tuple[float, float], ...]) -> float:
     """Largest peak-to-valley relief (um) of any mask h = sum_j c_j Z_j with lo_j <= c_j <= hi_j.
 
     The relief max(h) - min(h) over the pupil is convex in c, so its maximum over the box of
-    bounds lies at a corner; every corner is evaluated on a polar grid (201 radii x 361 angles,
-    rim included), which resolves the relief of these low orders to about 1e-4 relative.
+    bounds lies at a corner; with up to MAX_SAG_CORNERS corners each is evaluated on a polar grid
+    (201 radii x 361 angles, rim included), which resolves the relief of low orders to about 1e-4
+    relative. With more free terms the same maximum is taken the other way round: for two pupil
+    points p, q the box's largest h(p) - h(q) is sum_j max(lo_j d_j, hi_j d_j) with
+    d_j = Z_j(p) - Z_j(q), maximised over the pairs of a coarser grid (41 radii x 97 angles).
     """
-    basis = np.stack([zernike_noll(j + 1, _RHO, _THETA).ravel() for j in range(len(bounds_um))])
-    corners = np.array(list(itertools.product(*[sorted({lo, hi}) for lo, hi in bounds_um])))
-    relief = corners @ basis
-    return float((relief.max(axis=1) - relief.min(axis=1)).max())
+    n_corners = math.prod(len({lo, hi}) for lo, hi in bounds_um)
+    if n_corners <= MAX_SAG_CORNERS:
+        basis = np.stack([zernike_noll(j + 1, _RHO, _THETA).ravel() for j in range(len(bounds_um))])
+        corners = np.array(list(itertools.product(*[sorted({lo, hi}) for lo, hi in bounds_um])))
+        relief = corners @ basis
+        return float((relief.max(axis=1) - relief.min(axis=1)).max())
+    basis = np.stack([zernike_noll(j + 1, _RHO_PAIRS, _THETA_PAIRS).ravel() for j in range(len(bounds_um))]).T
+    lo, hi = (np.array(b) for b in zip(*bounds_um))
+    worst = 0.0
+    for start in range(0, basis.shape[0], 256):  # (256, points, terms) differences at a time
+        d = basis[start:start + 256, None, :] - basis[None, :, :]
+        worst = max(worst, float(np.maximum(d * lo, d * hi).sum(axis=-1).max()))
+    return worst
 
 
 # What the float32 sensor model can represent. Its noise model and the ideal observer's likelihood

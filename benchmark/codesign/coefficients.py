@@ -22,6 +22,11 @@ BOUND_TOLERANCE = 0.01
 NOLL_NAMES = ("Z1 piston", "Z2 tilt x", "Z3 tilt y", "Z4 defocus", "Z5 astigmatism 45", "Z6 astigmatism 0")
 
 
+def noll_name(j: int) -> str:
+    """A label for Noll term j >= 1: its name for Z1..Z6, "Zj" beyond (a mask of more terms)."""
+    return NOLL_NAMES[j - 1] if j <= len(NOLL_NAMES) else f"Z{j}"
+
+
 def initial_coefficients(spec: LensSpec, seed: int, amplitude_um: float = INITIAL_AMPLITUDE_UM) -> tuple[float, ...]:
     """Starting coefficients (um): the spec's plus a uniform draw in [-amplitude_um, amplitude_um]
     on every term its bounds leave free, clipped to the bounds; a pure function of `seed`."""

@@ -22,7 +22,7 @@ from torch.utils.tensorboard import SummaryWriter
 
 from benchmark.store.cache import seal, write_verified
 from benchmark.results.charts import new_figure, save_figure
-from benchmark.codesign.coefficients import NOLL_NAMES
+from benchmark.codesign.coefficients import noll_name
 
 # TensorBoard groups: prefix of a stat's name -> folder of its tag.
 _GROUPS = (("grad_", "grad_norm/"), ("lambda_", "lambda/"), ("adversary_", "adversary/"))
@@ -66,7 +66,7 @@ class CurveLog:
                 continue
             if key == "coefficients_um":
                 for j, c in enumerate(value):
-                    self._events.add_scalar(f"coefficients_um/{NOLL_NAMES[j]}", c, step)
+                    self._events.add_scalar(f"coefficients_um/{noll_name(j + 1)}", c, step)
             else:
                 self._events.add_scalar(tag(key), value, step)
         self._events.flush()
@@ -117,8 +117,8 @@ def chart(curves: list[dict[str, Any]], path: Path, title: str) -> Path:
         ax.legend(fontsize=8)
     ax = axes[1, 0]
     steps = [e["step"] for e in curves]
-    for j in range(1, len(NOLL_NAMES)):
-        ax.plot(steps, [e["coefficients_um"][j] for e in curves], label=NOLL_NAMES[j])
+    for j in range(1, len(curves[0]["coefficients_um"]) if curves else 0):
+        ax.plot(steps, [e["coefficients_um"][j] for e in curves], label=noll_name(j + 1))
     ax.set_title("mask coefficients (um of glass)")
     ax.set_xlabel("step")
     ax.legend(fontsize=8)

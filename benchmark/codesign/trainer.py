@@ -36,7 +36,7 @@ from benchmark.store.cache import config_hash, discard, write_verified
 from benchmark.codesign.adversary import MARGIN_DB, Probe, build_adversary, pretrain_adversary
 from benchmark.codesign.artifacts import load_checkpoint, load_weights, publish_directory, read_json, save_checkpoint, save_weights, verified, write_json
 from benchmark.codesign.balancing import Balance, OpticsContext, settings
-from benchmark.codesign.coefficients import INITIAL_AMPLITUDE_UM, NOLL_NAMES, bound_limited, initial_coefficients
+from benchmark.codesign.coefficients import INITIAL_AMPLITUDE_UM, bound_limited, initial_coefficients, noll_name
 from benchmark.codesign.curves import PUBLISHED_FILES, CurveLog
 from benchmark.codesign.data import CropSampler, step_generator
 from benchmark.codesign.replicas import SingleProcess
@@ -333,7 +333,7 @@ class CoDesign:
         if mask.bounds_um is not None:
             limited = bound_limited(final, mask.bounds_um)
             record.update(bounds_um=[list(b) for b in mask.bounds_um], max_sag_um=mask.max_sag_um,
-                          bound_limited=bool(limited), bound_limited_terms=[NOLL_NAMES[j - 1] for j in limited])
+                          bound_limited=bool(limited), bound_limited_terms=[noll_name(j) for j in limited])
         if state.deb is not None:
             assert state.pretraining is not None
             record["adversary"] = {"pretraining": state.pretraining,

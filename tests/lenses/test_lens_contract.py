@@ -12,7 +12,7 @@ import torch
 import lenses
 from benchmark.store.profiles import get_profile
 
-SPECS = sorted((Path(lenses.__file__).parent / "specs").glob("*.toml"))
+SPECS = sorted((Path(lenses.__file__).parent / "specs").rglob("*.toml"))  # the examples/ too
 REGISTERED = sorted(lenses.available())
 
 
