@@ -347,16 +347,34 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def lens_kind_catalogue() -> list[dict[str, str]]:
+    """Every kind of lens spec a .toml file may give (--lens FILE.toml): its name, what it holds, an example."""
+    from lenses.builtin import EXAMPLES
+    from lenses.spec import KIND_DESCRIPTIONS
+    rows = []
+    for kind, description in KIND_DESCRIPTIONS.items():
+        example = EXAMPLES[kind]
+        try:
+            shown = str(example.relative_to(Path.cwd()))
+        except ValueError:  # run from elsewhere: the installed path
+            shown = str(example)
+        rows.append({"kind": kind, "description": description, "example": shown})
+    return rows
+
+
 def cmd_list(args: argparse.Namespace) -> int:
     from benchmark.scenes import SCENE_SETS
-    lens_rows, attacker_rows = lens_catalogue(), attacker_catalogue()
+    lens_rows, attacker_rows, kind_rows = lens_catalogue(), attacker_catalogue(), lens_kind_catalogue()
     if args.json:
-        print(json.dumps({"lenses": lens_rows, "attackers": attacker_rows,
+        print(json.dumps({"lenses": lens_rows, "lens_kinds": kind_rows, "attackers": attacker_rows,
                           "scene_sets": [{"name": k, "description": v} for k, v in SCENE_SETS.items()]}, indent=1))
         return 0
     print("lenses (each runs when named: --lens NAME):")
     for row in lens_rows:
         print(f"  {row['name']:16s} {row['kind']:12s} {row['description']}")
+    print("lens spec kinds (bring your own lens: --lens FILE.toml; README, docs/lenses.md):")
+    for row in kind_rows:
+        print(f"  {row['kind']:16s} {row['description']}; example: {row['example']}")
     print("attackers (standard: in the standard ensemble, run when --attack is not given (docs/ensemble.md); "
           "all-chains: added by --all-chains; named: only with --attack NAME):")
     for row in attacker_rows:

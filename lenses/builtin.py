@@ -11,6 +11,9 @@ from lenses.optics import Geometry, pupil_samples_for
 from lenses.spec import LensSpec, load_spec
 
 SPEC_DIR = Path(__file__).parent / "specs"
+# One shipped example spec per kind of encoder (lenses.spec.KINDS), for `--lens FILE.toml`.
+EXAMPLES = {"zernike": SPEC_DIR / "examples" / "zernike-15.toml",
+            "measured-psf": SPEC_DIR / "examples" / "measured-defocus.toml"}
 
 
 def _fixed(name: str) -> Lens:

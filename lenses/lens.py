@@ -1,20 +1,43 @@
-"""A camera: phase-mask lens plus sensor, as one differentiable torch module."""
+"""A camera: an encoder (phase mask, or a measured PSF) plus sensor, as one differentiable torch module."""
 
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import torch
 
 from lenses.convolve import apply_otf, convolve, fft_shape, psf_otf, uses_fft
+from lenses.measured import read_psf_channels, sensor_psf, sha256_of
 from lenses.optics import Geometry, PupilModel, choose_geometry
 from lenses.sensor import Sensor
-from lenses.spec import LensSpec
+from lenses.spec import LensSpec, LensSpecError
+
+
+def measured_psf(spec: LensSpec) -> tuple[torch.Tensor, torch.Tensor]:
+    """A measured-PSF spec's PSF on its sensor grid (3, K, K) float32, each channel summing to 1, and the
+    energy fraction (3,) of the measured images inside it (`lenses.measured.sensor_psf`).
+
+    Raises LensSpecError when a file no longer holds what the spec was validated against (its sha256).
+    """
+    m = spec.measured_psf
+    if m is None:
+        raise ValueError(f"lens spec {spec.name!r} is a {spec.kind} lens, not a measured PSF")
+    paths = [Path(f) for f in m.files]
+    for i, (path, digest) in enumerate(zip(paths, m.sha256)):
+        if sha256_of(path) != digest:
+            raise LensSpecError(f"measured_psf.files[{i}] ({path}) changed since the spec was read "
+                                f"(measured_psf.sha256[{i}] = {digest!r}); load the spec again")
+    psf, fraction = sensor_psf(read_psf_channels(paths), m.pixel_pitch_um, spec.sensor.pixel_pitch_um,
+                               spec.simulation.max_psf_size_px)
+    return torch.from_numpy(psf).to(torch.float32), torch.from_numpy(fraction).to(torch.float32)
 
 
 class Lens(torch.nn.Module):
     """Scene radiance (B,3,H,W) in [0,1] -> sensor image (B,3,H,W) in [0,1].
 
+    The PSF comes from the spec's encoder: a Zernike phase mask through `pupil` (Fourier optics), or a
+    measured PSF used as given (`pupil` None, geometry.pupil_samples 0, `coefficients_um` empty).
     `coefficients_um` (n,) holds the n Noll Zernike coefficients of the mask thickness in um of
     glass; it is a trainable parameter when the spec declares bounds. Grid sizes are fixed at
     construction (from the bounds for trainable masks), so nothing changes shape while training.
@@ -25,18 +48,28 @@ class Lens(torch.nn.Module):
 
     utility_net: torch.nn.Module | None
     adversary: torch.nn.Module | None
+    measured: torch.Tensor  # buffers of a measured-PSF lens: its PSF (3, K, K) and energy fraction (3,)
+    measured_energy: torch.Tensor
     training_record: dict | None
 
     def __init__(self, spec: LensSpec, geometry: Geometry | None = None):
         super().__init__()
         self.spec = spec
-        if geometry is None:
+        self.pupil: PupilModel | None = None
+        if spec.measured_psf is not None:
+            psf, fraction = measured_psf(spec)
+            geometry = Geometry(0, psf.shape[-1])
+            self.initial_energy_fraction = fraction
+            self.register_buffer("measured", psf, persistent=False)
+            self.register_buffer("measured_energy", fraction, persistent=False)
+        elif geometry is None:
             geometry, fraction = choose_geometry(spec)
             self.initial_energy_fraction = fraction
         self.geometry = geometry
         self.coefficients_um = torch.nn.Parameter(torch.tensor(spec.mask.zernike_um, dtype=torch.float32),
                                                   requires_grad=spec.mask.trainable)
-        self.pupil = PupilModel(spec, geometry)
+        if spec.measured_psf is None:
+            self.pupil = PupilModel(spec, geometry)
         self.sensor = Sensor(spec.sensor, spec.optics.aperture_diameter_mm)
         # Networks co-designed with this lens and the record of that training (set by
         # benchmark.codesign); plain attributes, not submodules, so that lens.parameters() stays
@@ -55,6 +88,8 @@ class Lens(torch.nn.Module):
 
     def psf_and_energy(self) -> tuple[torch.Tensor, torch.Tensor]:
         """PSF (3,K,K) with channels R,G,B each summing to 1, and the energy fraction (3,) it holds."""
+        if self.pupil is None:
+            return self.measured, self.measured_energy
         return self.pupil(self.coefficients_um)
 
     def psf(self) -> torch.Tensor:

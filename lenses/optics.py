@@ -96,7 +96,7 @@ def phase_slope_terms(spec: LensSpec) -> np.ndarray:
 class Geometry:
     """Grid sizes, fixed once per lens so that nothing changes shape while a mask trains."""
 
-    pupil_samples: int   # N: pupil grid is N x N over the aperture diameter
+    pupil_samples: int   # N: pupil grid is N x N over the aperture diameter (0: no pupil, a measured PSF)
     psf_size_px: int     # K: PSF support (odd) on the sensor grid
 
     @property

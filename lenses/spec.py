@@ -80,6 +80,16 @@ class SimulationSpec:
 
 
 @dataclass(frozen=True)
+class MeasuredPsfSpec:
+    """A PSF measured with a point source: the optics of the lens are these images, used as given."""
+
+    files: tuple[str, ...]  # 1 (all channels, or R, G, B in one image) or 3 (R, G, B); absolute paths
+    pixel_pitch_um: float  # pitch of the measured images' pixels on the sensor plane
+    sha256: tuple[str, ...]  # of each file's bytes: the spec (and every cache key) changes with the data
+    measured_on: str = ""  # the sensor (and setup) the PSF was measured with; provenance only
+
+
+@dataclass(frozen=True)
 class LensSpec:
     name: str
     optics: OpticsSpec = field(default_factory=OpticsSpec)
@@ -88,11 +98,21 @@ class LensSpec:
     simulation: SimulationSpec = field(default_factory=SimulationSpec)
     description: str = ""
     source: str = ""  # where the spec came from (path or "builtin:NAME"); provenance only
+    # The encoder when it is not a Zernike mask (then mask.zernike_um is empty); at most one is set.
+    measured_psf: MeasuredPsfSpec | None = None
+
+    @property
+    def kind(self) -> str:
+        """The encoder: "zernike" (a phase mask of mask.zernike_um) or "measured-psf"."""
+        return "measured-psf" if self.measured_psf is not None else "zernike"
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain TOML-ready dict (without `source`)."""
+        """Plain TOML-ready dict (without `source`); a Zernike lens's dict holds no key of the other kinds."""
         d = dataclasses.asdict(self)
         d.pop("source")
+        for key in ENCODER_SECTIONS:
+            if d[key] is None:
+                d.pop(key)
         if d["mask"]["bounds_um"] is None:
             d["mask"].pop("bounds_um")
         if d["mask"]["random_seed"] is None:
@@ -103,7 +123,16 @@ class LensSpec:
 
 
 _SECTIONS = {"optics": OpticsSpec, "mask": MaskSpec, "sensor": SensorSpec, "simulation": SimulationSpec}
-_TOP = {"name", "description", *_SECTIONS}
+# Sections that replace the Zernike mask as the lens's encoder, with their kind's name.
+ENCODER_SECTIONS = {"measured_psf": "measured-psf"}
+KINDS = ("zernike", *ENCODER_SECTIONS.values())
+KIND_DESCRIPTIONS = {
+    "zernike": "[mask] zernike_um: a phase mask of any number of Noll terms in um of glass (with bounds_um: "
+               "co-designed)",
+    "measured-psf": "[measured_psf] files, pixel_pitch_um: a PSF measured with a point source (one image per "
+                    "channel or one for all), used as given; not co-designed",
+}
+_TOP = {"name", "description", *_SECTIONS, *ENCODER_SECTIONS}
 
 
 def _number(value: Any, where: str) -> float:
@@ -302,8 +331,94 @@ def _simulation(t: dict) -> SimulationSpec:
     )
 
 
+def _file(value: Any, where: str, base: Path) -> Path:
+    """An existing file named by a spec, relative to the spec's folder."""
+    if not isinstance(value, str) or not value:
+        raise LensSpecError(f"{where} must be a file path (a string), got {type(value).__name__} {value!r}")
+    path = (base / Path(value).expanduser()).resolve()
+    if not path.is_file():
+        raise LensSpecError(f"{where}: file {value!r} does not exist ({path}; a relative path is read from the "
+                            "spec file's folder)")
+    return path
+
+
+def _checked_hashes(t: dict, where: str, paths: list[Path]) -> tuple[str, ...]:
+    from lenses.measured import sha256_of
+    actual = tuple(sha256_of(p) for p in paths)
+    if "sha256" in t:
+        given = t["sha256"]
+        if not isinstance(given, list) or len(given) != len(paths) or not all(isinstance(h, str) for h in given):
+            raise LensSpecError(f"{where}.sha256 must be a list of {len(paths)} hex strings, one per file, "
+                                f"got {given!r}")
+        for i, (g, a) in enumerate(zip(given, actual)):
+            if g.lower() != a:
+                raise LensSpecError(f"{where}.sha256[{i}] = {g!r} does not match the content of {paths[i]} (the "
+                                    f"file changed since the spec was written); valid: {a!r}, or leave sha256 out")
+    return actual
+
+
+def _measured_psf(t: dict, base: Path) -> MeasuredPsfSpec:
+    from lenses.measured import read_psf_channels
+    _check_keys(t, {f.name for f in dataclasses.fields(MeasuredPsfSpec)}, "measured_psf")
+    files = t.get("files")
+    if files is None:
+        raise LensSpecError("missing field measured_psf.files (a list of 1 image for all three channels, or "
+                            "3 images R, G, B: .npy, .tif/.tiff or .png)")
+    if not isinstance(files, list):
+        raise LensSpecError(f"measured_psf.files must be a list of 1 or 3 file paths, got {type(files).__name__} "
+                            f"{files!r}")
+    if "pixel_pitch_um" not in t:
+        raise LensSpecError("missing field measured_psf.pixel_pitch_um (the pitch in um of the measured image's "
+                            "pixels on the sensor plane, e.g. 3.45 when measured on the suite's sensor)")
+    pitch = _positive(t["pixel_pitch_um"], "measured_psf.pixel_pitch_um")
+    measured_on = t.get("measured_on", "")
+    if not isinstance(measured_on, str):
+        raise LensSpecError(f"measured_psf.measured_on must be a string, got {type(measured_on).__name__}")
+    paths = [_file(f, f"measured_psf.files[{i}]", base) for i, f in enumerate(files)]
+    try:
+        read_psf_channels(paths)
+    except ValueError as exc:
+        text = str(exc)
+        raise LensSpecError(f"measured_psf.files{'' if text.startswith('[') else ' '}{text}") from None
+    return MeasuredPsfSpec(files=tuple(str(p) for p in paths), pixel_pitch_um=pitch,
+                           sha256=_checked_hashes(t, "measured_psf", paths), measured_on=measured_on)
+
+
+def _no_mask(raw: dict, section: str) -> None:
+    """Refuse a Zernike mask beside another encoder; the empty mask `to_dict` writes for one is fine."""
+    table = raw.get("mask", {})
+    empty = isinstance(table, dict) and table.get("zernike_um", []) in ([], ()) and \
+        set(table) <= {"zernike_um", "random_amplitude_um"} and table.get("random_amplitude_um", 0.0) == 0.0
+    if empty:
+        return
+    kind = ENCODER_SECTIONS[section]
+    if isinstance(table, dict) and "bounds_um" in table:
+        raise LensSpecError(f"mask.bounds_um asks to co-design the lens, but a {kind} lens ([{section}]) has no "
+                            "optical parameters to train; drop mask.bounds_um (only a Zernike mask is co-designed)")
+    raise LensSpecError(f"[mask] and [{section}] are two encoders; give one of them ([{section}] is the whole "
+                        "optics of the lens, it takes no mask coefficients)")
+
+
+def _encoder(raw: dict, source: str) -> tuple[MaskSpec, MeasuredPsfSpec | None]:
+    given = [key for key in ENCODER_SECTIONS if key in raw]
+    if not given:
+        return _mask(_section(raw, "mask")), None
+    if len(given) > 1:
+        raise LensSpecError(f"{' and '.join(f'[{k}]' for k in given)} are two encoders; give one of them")
+    _no_mask(raw, given[0])
+    table = raw[given[0]]
+    if not isinstance(table, dict):
+        raise LensSpecError(f"[{given[0]}] must be a table, got {type(table).__name__}")
+    base = Path(source).parent if source.endswith(".toml") else Path.cwd()
+    return MaskSpec(zernike_um=()), _measured_psf(table, base)
+
+
 def parse_spec(raw: dict, source: str = "") -> LensSpec:
-    """Validate a spec dict (as read from TOML) into a frozen LensSpec."""
+    """Validate a spec dict (as read from TOML) into a frozen LensSpec.
+
+    Files that the spec names (a measured PSF's images) are read relative to the folder of `source`
+    when it is a .toml path, else to the working directory, and checked here: a bad file fails at load.
+    """
     _check_keys(raw, _TOP, "")
     if "name" not in raw:
         raise LensSpecError(f"missing field 'name' in lens spec {source or '(dict)'}")
@@ -313,7 +428,8 @@ def parse_spec(raw: dict, source: str = "") -> LensSpec:
     description = raw.get("description", "")
     if not isinstance(description, str):
         raise LensSpecError(f"description must be a string, got {type(description).__name__}")
-    optics, mask, sensor = _optics(_section(raw, "optics")), _mask(_section(raw, "mask")), _sensor(_section(raw, "sensor"))
+    optics, sensor = _optics(_section(raw, "optics")), _sensor(_section(raw, "sensor"))
+    mask, measured_psf = _encoder(raw, source)
     # The electrons a pixel collects at radiance 1 scale with the aperture's area: the two fields
     # in range apart may still multiply past what the sensor model represents.
     electrons = sensor.white_level_photons * (optics.aperture_diameter_mm / sensor.reference_aperture_diameter_mm) ** 2
@@ -330,6 +446,7 @@ def parse_spec(raw: dict, source: str = "") -> LensSpec:
         sensor=sensor,
         simulation=_simulation(_section(raw, "simulation")),
         source=source,
+        measured_psf=measured_psf,
     )
 
 
@@ -364,6 +481,7 @@ def spec_to_toml(spec: LensSpec) -> str:
     if d["mask"].get("random_seed") is not None:
         d["mask"].pop("random_seed")  # the drawn coefficients are written out instead
     lines = [f"name = {_toml_value(d['name'])}", f"description = {_toml_value(d['description'])}"]
-    for section in _SECTIONS:
+    sections = [s for s in (*_SECTIONS, *ENCODER_SECTIONS) if s in d and not (s == "mask" and spec.kind != "zernike")]
+    for section in sections:
         lines += ["", f"[{section}]"] + [f"{k} = {_toml_value(v)}" for k, v in d[section].items()]
     return "\n".join(lines) + "\n"

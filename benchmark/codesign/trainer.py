@@ -95,6 +95,10 @@ class CoDesign:
     def __init__(self, start: LensSpec, scheme: Scheme, profile: Any, seed: int, device: str, cache_dir: Path,
                  name: str | None = None, scene_set: str = "synthetic", replicas: SingleProcess | None = None,
                  use_shipped: bool = True):
+        if scheme.optics and start.kind != "zernike":
+            raise ValueError(f"scheme {scheme.name!r} trains the optics, but lens spec {start.name!r} is a {start.kind} "
+                             "lens: it has no optical parameters to train (only a Zernike mask with mask.bounds_um "
+                             "is co-designed)")
         if scheme.optics and not start.mask.trainable:
             raise ValueError(f"scheme {scheme.name!r} trains the optics, but lens spec {start.name!r} declares no "
                              "mask.bounds_um (a trainable mask declares its bounds)")
