@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from benchmark.store.cache import atomic_write_text, exclusive
-from benchmark.results.entry_checks import check_entry_json, check_rows
+from benchmark.results.entry_checks import check_entry_json, check_rows, check_units
 from benchmark.results.schema import LEGACY_PROVENANCE, Row, Units, dumps_compact, infer_legacy_kind
 
 LEADERBOARD = Path(__file__).resolve().parents[2] / "leaderboard"
@@ -119,9 +119,10 @@ class Entry:
         return entry
 
     def check(self) -> None:
-        """Raise ValueError naming the row and field when a row is not the entry's or a metric is out of
-        its range (``benchmark.results.entry_checks``)."""
+        """Raise ValueError naming the row and field when a row is not the entry's, a metric is out of its
+        range or the per-unit outcomes contradict the rows (``benchmark.results.entry_checks``)."""
         check_rows(self.rows, self.lens, self.profile, self.scenes, self.seeds)
+        check_units(self.rows)
 
     def chains(self) -> list[Chain]:
         """One summary per attack chain, in the order the rows first name them (failed rows left out)."""

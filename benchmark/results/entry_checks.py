@@ -11,10 +11,20 @@ readers add the file's path.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 from typing import Any
 
+from benchmark.results.plate_scoring import READABLE_MIN_WIDTH_PX
 from benchmark.results.schema import Row
+
+# A plate row's per-plate widths; rows without them hold only the plates they pooled (entries of runs
+# that scored plates from 32 px).
+WIDTH_VALUE = "width_px"
+# The scene sets name their scenes <scenes>/<split>/<seed>/<index> (benchmark.scenes.loading).
+SCENE_NAME = re.compile(r"^[^/]+/[^/]+/(\d+)/")
+# How far a row's PSNR may sit from the mean of its per-scene values, which are stored rounded.
+PSNR_TOLERANCE_DB = 1e-3
 
 # Fields of a version-2 entry: name -> (is it required, what it holds).
 FIELDS: dict[str, tuple[bool, str]] = {
@@ -125,3 +135,78 @@ def check_rows(rows: Sequence[Row], lens: str, profile: str, scenes: str, seeds:
             if found is not None and not found[0] <= value <= found[1]:
                 low, high, what = found
                 raise ValueError(f"{where}: metrics.{name} = {value} is outside [{low}, {high}] ({name} is {what})")
+
+
+def check_units(rows: Sequence[Row]) -> None:
+    """Raise ValueError naming the row and field when the rows' per-unit outcomes contradict themselves or
+    their metrics: a second row of one (kind, chain, seed); a unit of another seed than its row's; a
+    per-plate ``correct`` other than 0 or 1; an ``n_plates``, ``plate_acc`` or ``psnr_db`` other than its
+    own units give; and, within a seed, plate rows that score different plates or that record widths on some
+    rows and not others. Each would change a published figure without a run having measured it (the
+    ensemble aligns a seed's chains by plate id, so a renamed id would drop plates from it quietly)."""
+    first_of: dict[tuple[str, str, int], int] = {}
+    plate_rows: dict[int, list[int]] = {}
+    for i, row in enumerate(rows):
+        where = f"rows[{i}] ({row.lens}/{row.attack} seed {row.seed})"
+        key = (row.kind, row.attack, row.seed)
+        if key in first_of:
+            raise ValueError(f"{where}: a second {row.kind} row of {row.attack!r} at seed {row.seed} (the first is "
+                             f"rows[{first_of[key]}]); an entry holds one row per chain and seed")
+        first_of[key] = i
+        units = row.units
+        if units is None:
+            continue
+        for name in units.names():
+            named = SCENE_NAME.match(name)  # names of the suite's scene sets; others say no seed
+            if named is not None and int(named.group(1)) != row.seed:
+                raise ValueError(f"{where}: units id {name!r} is not of the row's seed {row.seed} (scene names are "
+                                 "<scenes>/<split>/<seed>/<index>)")
+        if units.unit == "plate":
+            bad = sorted({v for v in units.values.get("correct", ()) if v not in (0, 1)}, key=repr)
+            if bad:
+                raise ValueError(f"{where}: units.values.correct holds {bad[:3]}; a plate's outcome is 0 or 1")
+            if row.ok and "correct" in units.values:
+                plate_rows.setdefault(row.seed, []).append(i)
+        elif units.unit == "scene" and row.ok and "psnr_db" in units.values and "psnr_db" in row.metrics:
+            values = units.values["psnr_db"]
+            if row.metrics.get("n_images") == len(values) and abs(math.fsum(values) / len(values)
+                                                                   - row.metrics["psnr_db"]) > PSNR_TOLERANCE_DB:
+                raise ValueError(f"{where}: metrics.psnr_db = {row.metrics['psnr_db']} but its {len(values)} scenes' "
+                                 f"units average {math.fsum(values) / len(values):.4f} dB")
+    for seed, members in plate_rows.items():
+        _check_seed_plates(seed, [(i, rows[i]) for i in members])
+        for i in members:
+            _check_plate_metrics(f"rows[{i}] ({rows[i].lens}/{rows[i].attack} seed {seed})", rows[i])
+
+
+def _check_plate_metrics(where: str, row: Row) -> None:
+    values = row.units.values  # type: ignore[union-attr]
+    correct = values["correct"]
+    widths = values.get(WIDTH_VALUE)
+    counted = [c for c, w in zip(correct, widths) if w >= READABLE_MIN_WIDTH_PX] if widths else list(correct)
+    # A metric the row does not state is recomputed from the units where it is shown; one it states must agree.
+    n = row.metrics.get("n_plates")
+    if n is not None and n != len(counted):
+        raise ValueError(f"{where}: metrics.n_plates = {n} but its units hold {len(counted)} pooled plates")
+    acc = row.metrics.get("plate_acc")
+    if counted and acc is not None and abs(acc - sum(counted) / len(counted)) > 1e-9:
+        raise ValueError(f"{where}: metrics.plate_acc = {acc} but its units read {sum(counted)} of {len(counted)} "
+                         "pooled plates")
+
+
+def _check_seed_plates(seed: int, members: Sequence[tuple[int, Row]]) -> None:
+    (i0, r0), rest = members[0], members[1:]
+    names0 = set(r0.units.names())  # type: ignore[union-attr]
+    has_widths = WIDTH_VALUE in r0.units.values  # type: ignore[union-attr]
+    for i, row in rest:
+        units = row.units
+        assert units is not None
+        if (WIDTH_VALUE in units.values) != has_widths:
+            with_, without = (i0, i) if has_widths else (i, i0)
+            raise ValueError(f"seed {seed}: rows[{with_}] records plate widths and rows[{without}] does not; a "
+                             "seed's plate rows record them all or none")
+        names = set(units.names())
+        if names != names0:
+            raise ValueError(f"seed {seed}: rows[{i0}] ({r0.attack}) and rows[{i}] ({row.attack}) score different "
+                             f"plates ({len(names0 - names)} ids only in the first, {len(names - names0)} only in the "
+                             "second); every plate row of a seed scores the same plates")

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from benchmark.results.plate_scoring import READABLE_MIN_WIDTH_PX
 from benchmark.publish import board_files
 from benchmark.publish import report as leaderboard_report
 from benchmark.publish.leaderboard import publish
@@ -93,7 +94,8 @@ def test_render_deletes_an_orphan_and_a_stale_image(board):
 def _plates(attack: str, correct: list[int], widths: list[float]) -> Row:
     restorer, _, reader = attack.rpartition(">")
     return Row(kind="chain" if restorer else "reader", attack=attack, restorer=restorer or None, reader=reader,
-               lens="gp", seed=0, profile="quick", scenes="synthetic", metrics={"plate_acc": float(np.mean(correct))},
+               lens="gp", seed=0, profile="quick", scenes="synthetic",
+               metrics={"plate_acc": float(np.mean([c for c, w in zip(correct, widths) if w >= READABLE_MIN_WIDTH_PX]))},
                units=Units("plate", "s#", tuple(str(i) for i in range(len(correct))),
                            {"correct": tuple(correct), "width_px": tuple(widths)}))
 
