@@ -41,6 +41,7 @@ from benchmark.store.provenance import git_commit
 from benchmark.runner.config import RunConfig, training_scenes
 from benchmark.scenes import PLATE_FORMAT, SCENE_SETS, load_scenes, plate_entropy_bits
 from benchmark.runner.defaults import STANDARD_ENSEMBLE
+from benchmark.results.observer.published import fail_above_ceiling, load_study, run_violations
 from benchmark.results.schema import Row, read_results, write_results
 from benchmark.results.schema import Results as ResultsFile
 from benchmark.runner.pictures import copy_picture
@@ -218,6 +219,8 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         raise
     run_meta = {**(meta or {}), "profile": cfg.profile.to_dict(), "executor": executor,
                 "wall_s": time.perf_counter() - t0}
+    output.rows = fail_above_ceiling(output.rows, run_violations(output.plates, output.lens_info, load_study())["violations"])
+    output.failed = [r for r in output.rows if not r.ok]
     results = Results(output.rows, output.settings, run_meta, folder, output)
     if folder is not None:
         write_run_outputs(folder, results)

@@ -22,6 +22,7 @@ from typing import Any
 
 from benchmark.publish import report as leaderboard_report
 from benchmark.publish.findings import co_designed
+from benchmark.results.observer.published import ABOVE_CEILING
 from benchmark.results.entries import (LEADERBOARD, Entry, entry_name, file_safe, locked, make_entry, read_entry,
                                        write_entry)
 from benchmark.results.schema import Results, Row, read_results
@@ -142,7 +143,13 @@ def publish_run(rows: Sequence[Row], profile: dict[str, Any], lens_info: dict[st
     README's results table when `directory` is the repository's). Returns the written entries.
 
     The whole of it holds the leaderboard's lock, so that a concurrent publish neither loses rows nor
-    renders over this one's pages with an older set of entries."""
+    renders over this one's pages with an older set of entries. A run with a row failed for reading above
+    the ideal observer's ceiling (``observer.published.fail_above_ceiling``) is refused: its readers' other
+    figures are as suspect as that one."""
+    above = [r for r in rows if not r.ok and r.error is not None and r.error.message.startswith(ABOVE_CEILING)]
+    if above:
+        raise ValueError(f"refusing to publish: {len(above)} row(s) read above the ideal observer's ceiling, e.g. "
+                         f"{above[0].lens}/{above[0].attack} seed {above[0].seed}: {above[0].error.message}")  # type: ignore[union-attr]
     with locked(directory):
         paths = publish(rows, profile, lens_info, directory, settings, replace)
         copy_run_pictures(out, lens_info, profile["name"], directory / "samples")

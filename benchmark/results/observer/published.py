@@ -19,6 +19,8 @@ only raise a false alarm, never hide a violation.
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 import logging
 import math
@@ -31,6 +33,7 @@ from benchmark.results.observer.ceiling import CeilingCurve
 from benchmark.results.observer.consistency import BinAccuracy, Violation, check_consistency
 from benchmark.results.ensemble import pooled_min_width
 from benchmark.results.plate_scoring import WIDTH_BINS_PX
+from benchmark.results.schema import Row, RowError
 from benchmark.results.stats import wilson_interval
 from lenses import LensSpecError, parse_spec
 
@@ -201,6 +204,25 @@ def _summary_line(checked: Sequence[str], not_checked: Mapping[str, str], bins: 
         parts.append("nothing checked")
     parts += [f"{lens} not checked: {why}" for lens, why in sorted(not_checked.items())]
     return "; ".join(parts)
+
+
+ABOVE_CEILING = "CEILING VIOLATION"  # how a violation's message starts (``consistency.Violation.message``)
+
+
+def fail_above_ceiling(rows: Sequence[Row], violations: Sequence[Mapping[str, Any]]) -> list[Row]:
+    """`rows` with every row of a chain that reads above its lens's ceiling (``run_violations``) failed:
+    no honest attacker can, so the figure is a modelling or scoring error, or a reader that saw the
+    answers, and never a result. The failed row keeps its settings and names the violation (stage
+    "score"); every seed of the chain fails, since the violation pools them."""
+    named = {(v["lens"], v["reader"]): v["message"] for v in violations}
+    out = []
+    for row in rows:
+        message = named.get((row.lens, row.attack))
+        if message is not None and row.ok:
+            row = dataclasses.replace(row, status="failed", metrics={}, units=None, notes={},
+                                      error=RowError(row.attack, "score", f"{message}; the row is failed"))
+        out.append(row)
+    return out
 
 
 def write_run_check(out: Path, records: Sequence[Mapping[str, Any]], lens_info: Mapping[str, Mapping[str, Any]],
