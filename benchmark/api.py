@@ -249,6 +249,10 @@ def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike
     load_scenes(scenes, "val", 0, p.image_size, 0)  # validates the scene set name
     plate_format = PLATE_FORMAT if plate_format is None else plate_format  # "" is an error, not the default
     plate_entropy_bits(plate_format)  # validates the format before any work
+    if plate_format != PLATE_FORMAT and scenes.split(":")[0] == "synthetic":
+        log.warning("plate format %s: the bound counts such strings and the readers are told it, but the "
+                    "synthetic scenes render %s plates, so readers trained for %s read them wrongly",
+                    plate_format, PLATE_FORMAT, plate_format)
     if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
         raise ValueError(f"frames must be an integer >= 1, got {frames!r}")
     if budget_s is not None and (isinstance(budget_s, bool) or not isinstance(budget_s, (int, float))

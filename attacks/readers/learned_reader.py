@@ -30,6 +30,7 @@ import time
 from typing import Any, ClassVar
 
 import torch
+from safetensors import SafetensorError
 from safetensors.torch import load as load_safetensors
 from safetensors.torch import save as save_safetensors
 from torch import Tensor
@@ -40,7 +41,7 @@ from attacks.training.plate_reader_training import Camera, FitCurve, ReaderBudge
 from common.plate_render import PLATE_FORMAT, format_alphabets
 from attacks.readers.plates.plate_sim import plate_crops, psf_radius_px
 from attacks.training.restorer_training import lens_key
-from attacks.training.shipped_weights import Shipped, find_shipped
+from attacks.training.shipped_weights import Shipped, find_shipped, key_text
 
 __all__ = ["BUDGETS", "PRETRAIN_BUDGET", "LearnedReader", "pack_weights", "pretrain", "pretrained_key"]
 
@@ -180,8 +181,11 @@ class LearnedReader(Reader):
         if data is not None:
             try:
                 self.curve, self.trained = _unpack(net, data), False
-            except (RuntimeError, KeyError, ValueError) as exc:
-                log.warning("%s: cached weights do not fit the network (%s); fitting again", self.name, exc)
+            except (SafetensorError, RuntimeError, KeyError, ValueError) as exc:
+                where = ("the shipped fit " + self.shipped_fit.path.name if self.shipped_fit is not None
+                         else f"the cached weights of key {key_text(key)[:120]}")
+                log.warning("%s: %s do not load (%s: %s); fitting again and storing the new fit", self.name, where,
+                            type(exc).__name__, exc)
                 data, self.shipped_fit = None, None
                 net, _ = self._start(seed, pretrain_budget)  # a failed load may have overwritten some weights
         if data is None:

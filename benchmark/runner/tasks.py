@@ -41,7 +41,7 @@ from benchmark.store.provenance import provenance
 from benchmark.runner.rows import RowBuilder, training_facts, utility_units
 from benchmark.runner.pictures import plate_gallery, sample_grid, training_curves
 from benchmark.runner.config import RunConfig, training_scenes
-from benchmark.scenes import PLATE_FORMAT, Plate, Scene, load_scene, load_scenes, plate_entropy_bits
+from benchmark.scenes import Plate, Scene, load_scene, load_scenes, plate_entropy_bits
 from benchmark.scenes.windows import WidthQuota, plate_windows, window_scene
 from benchmark.results.schema import Row, RowError
 from benchmark.runner.sensing import sense, sense_windows, to_tensor, train_pairs_factory
@@ -279,11 +279,12 @@ def _builder(cfg: RunConfig, lens_name: str, seed: int, lens: lenses.Lens | None
 def fit_context(lens: lenses.Lens | None, cfg: RunConfig, seed: int,
                 segment: Callable[[torch.Tensor], torch.Tensor] | None) -> attacks.FitContext:
     """What an attacker of this lens may use: the lens (and its co-design adversary, if any), training
-    pairs, cache, device, seed, the profile's attack budget, the lens's segmenter and the scenes' plate format."""
+    pairs, cache, device, seed, the profile's attack budget, the lens's segmenter and the run's plate format
+    (what the bound counts; the scenes' own unless the run names another)."""
     folder = Path(cfg.cache_dir) / "attacks"
     return attacks.FitContext(lens=lens, train_pairs=None if lens is None else train_pairs_factory(lens, cfg, seed),
                               cache_dir=folder, artifacts=ArtifactCache(folder), device=cfg.device, seed=seed,
-                              budget=cfg.profile.attack_budget(), segmenter=segment, plate_format=PLATE_FORMAT,
+                              budget=cfg.profile.attack_budget(), segmenter=segment, plate_format=cfg.plate_format,
                               adversary=None if lens is None else lens.adversary)
 
 

@@ -293,3 +293,21 @@ def test_the_row_notes_say_where_the_fit_stopped_and_which_step_it_kept():
     # A report without a curve or a verdict gives no notes; nor does anything that is not a report.
     assert fit_notes(attacks.FitReport()) == {} and fit_notes(None) == {}
     assert fit_notes({"fit_curve": {"steps": [1], "stopped": "budget"}, "fit_still_rising": True}) == {}
+
+
+@pytest.mark.parametrize("garbage", [b"\xff" * 64, b"\x08\x00\x00\x00\x00\x00\x00\x00{\"a\":1}"])
+def test_a_cached_artifact_that_is_not_safetensors_is_refitted_and_overwritten(garbage, caplog):
+    # Bytes that pass the cache's checksum (it verifies what was written) but are no safetensors file: the
+    # fit names the artifact, fits again and overwrites it, so the next run loads a good one.
+    lens = lenses.load("ideal")
+    store = MemoryStore()
+    first = attacks.load("learned-reader")
+    first.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, artifacts=store))
+    (name,) = store.items
+    good = store.items[name]
+    store.items[name] = garbage
+    again = attacks.load("learned-reader")
+    with caplog.at_level("WARNING"):
+        again.fit(attacks.FitContext(lens=lens, device="cpu", seed=0, artifacts=store))
+    assert again.trained and store.items[name] == good
+    assert "learned-reader: the cached weights of key" in caplog.text and "do not load" in caplog.text
