@@ -1,8 +1,10 @@
-"""Lens simulation: Zernike phase mask, Fourier-optics PSF, sensor model, lens specs and registry.
+"""Lens simulation: phase mask or measured PSF, Fourier-optics PSF, sensor model, lens specs and registry.
 
-The phase mask (``zernike``, its glass in ``materials``), the PSF on the sensor grid (``optics``), image
-formation (``convolve``) and the sensor (``sensor``) make a camera (``lens``); a camera is a spec
-(``spec``, the built-in ones in ``specs/`` and ``builtin``), registered here by name. Beside them: the
+The phase mask (``zernike``, or a height map read by ``height_file``; its glass in ``materials``), the
+PSF on the sensor grid (``optics``; a measured one read and resampled by ``measured``), image formation
+(``convolve``) and the sensor (``sensor``) make a camera (``lens``); a camera is a spec (``spec``, the
+built-in ones in ``specs/`` and ``builtin``, examples of every kind in ``specs/examples/``), registered
+here by name. Beside them: the
 mask as a fab's height map (``mask_export``), object distance from pixel size (``depth``), and the
 attack-independent privacy bound (``bound``) and the sensor's raw electrons as the ideal observer's
 likelihood (``raw_likelihood``).

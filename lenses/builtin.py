@@ -13,7 +13,8 @@ from lenses.spec import LensSpec, load_spec
 SPEC_DIR = Path(__file__).parent / "specs"
 # One shipped example spec per kind of encoder (lenses.spec.KINDS), for `--lens FILE.toml`.
 EXAMPLES = {"zernike": SPEC_DIR / "examples" / "zernike-15.toml",
-            "measured-psf": SPEC_DIR / "examples" / "measured-defocus.toml"}
+            "measured-psf": SPEC_DIR / "examples" / "measured-defocus.toml",
+            "height-map": SPEC_DIR / "examples" / "gp-height-map.toml"}
 
 
 def _fixed(name: str) -> Lens:

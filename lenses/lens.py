@@ -36,8 +36,9 @@ def measured_psf(spec: LensSpec) -> tuple[torch.Tensor, torch.Tensor]:
 class Lens(torch.nn.Module):
     """Scene radiance (B,3,H,W) in [0,1] -> sensor image (B,3,H,W) in [0,1].
 
-    The PSF comes from the spec's encoder: a Zernike phase mask through `pupil` (Fourier optics), or a
-    measured PSF used as given (`pupil` None, geometry.pupil_samples 0, `coefficients_um` empty).
+    The PSF comes from the spec's encoder: a phase mask (Zernike terms, or a height map from a file, whose
+    `coefficients_um` is empty) through `pupil` (Fourier optics), or a measured PSF used as given (`pupil`
+    None, geometry.pupil_samples 0, `coefficients_um` empty).
     `coefficients_um` (n,) holds the n Noll Zernike coefficients of the mask thickness in um of
     glass; it is a trainable parameter when the spec declares bounds. Grid sizes are fixed at
     construction (from the bounds for trainable masks), so nothing changes shape while training.
@@ -50,6 +51,7 @@ class Lens(torch.nn.Module):
     adversary: torch.nn.Module | None
     measured: torch.Tensor  # buffers of a measured-PSF lens: its PSF (3, K, K) and energy fraction (3,)
     measured_energy: torch.Tensor
+    height_scale: torch.Tensor
     training_record: dict | None
 
     def __init__(self, spec: LensSpec, geometry: Geometry | None = None):
@@ -70,6 +72,8 @@ class Lens(torch.nn.Module):
                                                   requires_grad=spec.mask.trainable)
         if spec.measured_psf is None:
             self.pupil = PupilModel(spec, geometry)
+        # A height map is the pupil model's one basis term, at a fixed scale of 1 (not trained).
+        self.register_buffer("height_scale", torch.ones(1, dtype=torch.float64), persistent=False)
         self.sensor = Sensor(spec.sensor, spec.optics.aperture_diameter_mm)
         # Networks co-designed with this lens and the record of that training (set by
         # benchmark.codesign); plain attributes, not submodules, so that lens.parameters() stays
@@ -90,7 +94,7 @@ class Lens(torch.nn.Module):
         """PSF (3,K,K) with channels R,G,B each summing to 1, and the energy fraction (3,) it holds."""
         if self.pupil is None:
             return self.measured, self.measured_energy
-        return self.pupil(self.coefficients_um)
+        return self.pupil(self.height_scale if self.spec.height_map is not None else self.coefficients_um)
 
     def psf(self) -> torch.Tensor:
         """PSF (3,K,K), sensor-pixel sampling, each channel sums to 1; ideal peak at [K//2, K//2]."""

@@ -11,7 +11,8 @@ so the rim lies on the grid and n odd puts a node on the axis. Arrays are indexe
 with row 0 at +y and column 0 at -x, the order Zemax reads a Grid Sag file in (its first point is
 the (-x, +y) corner); x and y are the axes of the Zernike definition (theta from +x towards +y).
 
-Formats (``write_height_map``), every one with a sidecar ``PATH.json`` holding the metadata:
+Formats (``write_height_map``, read back by ``lenses.height_file.read_height_map``), every one with a
+sidecar ``PATH.json`` holding the metadata (which reading ignores: a height-map spec states the grid):
 - ``npy``: float64 (n, n) heights in um, NaN outside the clear aperture.
 - ``tiff``: 32-bit float (n, n) heights in um, NaN outside the aperture; the metadata as JSON in
   the ImageDescription tag and the grid spacing as the resolution (pixels per cm).
@@ -36,12 +37,13 @@ import numpy as np
 from numpy.polynomial import polynomial as P
 from scipy.signal import convolve2d
 
+from lenses.height_file import ZEMAX_MIN_NODES
 from lenses.materials import refractive_index
 from lenses.spec import LensSpec
 from lenses.zernike import noll_to_nm
 
 FORMATS = ("npy", "tiff", "zemax-gridsag", "csv")
-ZEMAX_MIN_NODES = 5  # OpticStudio rejects a Grid Sag file with fewer points per side
+
 METADATA_VERSION = 1
 
 
@@ -95,8 +97,12 @@ class HeightMap:
 def height_map(spec: LensSpec, n_samples: int = 257) -> HeightMap:
     """The mask of ``spec`` on ``n_samples`` x ``n_samples`` nodes spanning its aperture (see module doc).
 
-    Raises ValueError when n_samples < 5 (Zemax's minimum; too few to describe a mask anyway).
+    Raises ValueError when n_samples < 5 (Zemax's minimum; too few to describe a mask anyway), or when the
+    spec's encoder is not a Zernike mask (a height map is its file already; a measured PSF has no mask).
     """
+    if spec.kind != "zernike":
+        where = f"its mask is the file {spec.height_map.file}" if spec.height_map is not None else "it has no mask"
+        raise ValueError(f"lens {spec.name!r} is a {spec.kind} lens: {where}; export-mask writes Zernike masks")
     if isinstance(n_samples, bool) or not isinstance(n_samples, int) or n_samples < ZEMAX_MIN_NODES:
         raise ValueError(f"the mask grid needs at least {ZEMAX_MIN_NODES} samples per side, got {n_samples!r}")
     radius_um = spec.optics.aperture_diameter_mm * 1000.0 / 2.0
@@ -207,3 +213,4 @@ def _write_zemax(heights: HeightMap, path: Path) -> None:
             lines.append(f"{z_mm[r, c]:.15e} {heights.dz_dx[r, c]:.15e} {heights.dz_dy[r, c]:.15e} "
                          f"{cross_per_mm[r, c]:.15e} {0 if heights.inside[r, c] else 1}")
     path.write_text("\n".join(lines) + "\n")
+

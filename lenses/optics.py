@@ -13,6 +13,9 @@ matrix per axis and wavelength (`pixel_integration_matrix`), cached per geometry
 A matrix Fourier transform (`mft_kernel`) gives the point-sampled intensity at any sensor position
 for the closed-form checks.
 
+The mask thickness h is a Zernike sum (the spec's mask.zernike_um) or a height map read from a file and
+sampled on the pupil grid (`encoder_basis`); either way it enters only through the pupil phase.
+
 Sign convention: positive Z2 (x tilt) moves the PSF towards +x (increasing column index), positive
 Z3 towards +y (increasing row index).
 """
@@ -22,12 +25,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 import torch
 from scipy.fft import next_fast_len
 
+from lenses.height_file import max_steps_um, read_height_map, sample_height_map
 from lenses.materials import refractive_index
+from lenses.measured import sha256_of
 from lenses.spec import LensSpec, LensSpecError
 from lenses.zernike import max_gradient, zernike_basis
 
@@ -72,6 +78,53 @@ def optical_constants(spec: LensSpec) -> OpticalConstants:
     )
 
 
+@lru_cache(maxsize=8)
+def _height_file(path: str, sha256: str) -> np.ndarray:
+    data = read_height_map(path).height_um
+    if sha256_of(Path(path)) != sha256:
+        raise LensSpecError(f"height_map.file ({path}) changed since the spec was read (height_map.sha256 = "
+                            f"{sha256!r}); load the spec again")
+    data.setflags(write=False)
+    return data
+
+
+def height_map_um(spec: LensSpec) -> np.ndarray:
+    """A height-map spec's glass thickness (n_y, n_x) in um, row 0 at +y, NaN outside the glass (read-only,
+    cached per file and content). Raises LensSpecError when the file no longer matches the spec's sha256."""
+    if spec.height_map is None:
+        raise ValueError(f"lens spec {spec.name!r} is a {spec.kind} lens, not a height map")
+    return _height_file(spec.height_map.file, spec.height_map.sha256)
+
+
+def encoder_coefficients(spec: LensSpec) -> tuple[float, ...]:
+    """What `PupilModel` multiplies its basis by: the Zernike coefficients (um), or (1,) for a height map
+    (whose basis is the map itself)."""
+    return (1.0,) if spec.height_map is not None else spec.mask.zernike_um
+
+
+def encoder_basis(spec: LensSpec, pupil_samples: int) -> torch.Tensor:
+    """Thickness per unit coefficient on the N x N pupil grid, (n, N, N) float64 in um, zero outside the disk:
+    the Zernike basis of the mask's n terms, or the height map sampled on the grid (n = 1)."""
+    if spec.height_map is None:
+        return zernike_basis(len(spec.mask.zernike_um), pupil_samples, dtype=torch.float64)
+    radius_um = spec.optics.aperture_diameter_mm * 500.0
+    sampled = sample_height_map(height_map_um(spec), spec.height_map.sample_pitch_um, pupil_samples, radius_um)
+    return torch.from_numpy(sampled)[None]
+
+
+def height_map_slope(spec: LensSpec) -> float:
+    """Upper bound on |grad h| of a height map in um per unit normalised radius, from the steps between
+    neighbouring nodes over the aperture (and one node beyond, which the interpolation at the rim uses)."""
+    assert spec.height_map is not None
+    heights, pitch = height_map_um(spec), spec.height_map.sample_pitch_um
+    n_y, n_x = heights.shape
+    yy, xx = np.meshgrid((np.arange(n_y) - (n_y - 1) / 2) * pitch, (np.arange(n_x) - (n_x - 1) / 2) * pitch,
+                         indexing="ij")
+    radius_um = spec.optics.aperture_diameter_mm * 500.0
+    step_x, step_y = max_steps_um(np.where(np.hypot(xx, yy) <= radius_um + 1.5 * pitch, heights, np.nan))
+    return math.hypot(step_x, step_y) / pitch * radius_um
+
+
 def worst_case_coefficients(spec: LensSpec) -> np.ndarray:
     """|c_j| in um to size the grids for: the bounds of a trainable mask, else the coefficients."""
     if spec.mask.bounds_um is not None:
@@ -82,13 +135,17 @@ def worst_case_coefficients(spec: LensSpec) -> np.ndarray:
 def phase_slope_terms(spec: LensSpec) -> np.ndarray:
     """Upper bound on |grad phase| (rad per unit normalised radius), per channel and term.
 
-    Shape (3, n + 1): the n mask terms Z1..Zn then the defocus term (|grad psi rho^2| <= 2|psi|).
+    Shape (3, n + 1): the n mask terms Z1..Zn (one term for a height map) then the defocus term
+    (|grad psi rho^2| <= 2|psi|).
     Their sum per channel bounds the steepest phase slope (triangle inequality).
     """
     c = optical_constants(spec)
-    coeffs = worst_case_coefficients(spec)
-    grads = np.array([max_gradient(j) for j in range(1, len(coeffs) + 1)])
-    mask_terms = np.array(c.phase_per_um)[:, None] * (coeffs * grads)[None, :]
+    if spec.height_map is not None:
+        slopes = np.array([height_map_slope(spec)])
+    else:
+        coeffs = worst_case_coefficients(spec)
+        slopes = coeffs * np.array([max_gradient(j) for j in range(1, len(coeffs) + 1)])
+    mask_terms = np.array(c.phase_per_um)[:, None] * slopes[None, :]
     return np.concatenate([mask_terms, 2 * np.abs(np.array(c.defocus_rad))[:, None]], axis=1)
 
 
@@ -130,6 +187,7 @@ def pupil_samples_for(spec: LensSpec, psf_size_px: int) -> int:
     if n > limit:
         ch, term = np.unravel_index(np.argmax(terms), terms.shape)
         what = ("the defocus (optics.focus_distance_m vs optics.object_distance_m)" if term == terms.shape[1] - 1
+                else "the height map (height_map.file)" if spec.height_map is not None
                 else f"mask coefficient Z{term + 1} (mask.zernike_um[{term}] or its bound)")
         raise LensSpecError(
             f"{what} is too strong for the pupil grid: the phase slope reaches {slope.max():.0f} rad per unit"
@@ -254,7 +312,7 @@ class PupilModel(torch.nn.Module):
         self.geometry = geometry
         self.pitch_mm = spec.sensor.pixel_pitch_um * 1e-3
         n = geometry.pupil_samples
-        basis = zernike_basis(len(spec.mask.zernike_um), n, dtype=torch.float64)
+        basis = encoder_basis(spec, n)
         coords = (torch.arange(n, dtype=torch.float64) + 0.5) / n * 2 - 1
         rho2 = coords[None, :] ** 2 + coords[:, None] ** 2
         self.register_buffer("basis", basis, persistent=False)
@@ -386,7 +444,7 @@ def choose_geometry(spec: LensSpec) -> tuple[Geometry, torch.Tensor]:
     """
     k0 = initial_support_px(spec)
     probe = PupilModel(spec, Geometry(pupil_samples_for(spec, k0), k0))
-    coeffs = torch.tensor(spec.mask.zernike_um, dtype=torch.float64)
+    coeffs = torch.tensor(encoder_coefficients(spec), dtype=torch.float64)
     # A trainable mask is sized from its bounds alone, not from where it starts: the diffraction
     # support of the unmasked lens widened by the worst-case geometric blur diameter.
     probe_coeffs = torch.zeros_like(coeffs) if spec.mask.trainable else coeffs

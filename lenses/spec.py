@@ -90,6 +90,15 @@ class MeasuredPsfSpec:
 
 
 @dataclass(frozen=True)
+class HeightMapSpec:
+    """A phase mask given as a glass thickness map in a file (the formats `export-mask` writes); fixed."""
+
+    file: str  # absolute path; .npy, .tif/.tiff (heights in um), .dat (Zemax Grid Sag), .csv (x_mm, y_mm, height_um)
+    sample_pitch_um: float  # node spacing on the mask; the central node lies on the optical axis
+    sha256: str  # of the file's bytes: the spec (and every cache key) changes with the data
+
+
+@dataclass(frozen=True)
 class LensSpec:
     name: str
     optics: OpticsSpec = field(default_factory=OpticsSpec)
@@ -100,11 +109,14 @@ class LensSpec:
     source: str = ""  # where the spec came from (path or "builtin:NAME"); provenance only
     # The encoder when it is not a Zernike mask (then mask.zernike_um is empty); at most one is set.
     measured_psf: MeasuredPsfSpec | None = None
+    height_map: HeightMapSpec | None = None
 
     @property
     def kind(self) -> str:
-        """The encoder: "zernike" (a phase mask of mask.zernike_um) or "measured-psf"."""
-        return "measured-psf" if self.measured_psf is not None else "zernike"
+        """The encoder: "zernike" (a phase mask of mask.zernike_um), "measured-psf" or "height-map"."""
+        if self.measured_psf is not None:
+            return "measured-psf"
+        return "height-map" if self.height_map is not None else "zernike"
 
     def to_dict(self) -> dict[str, Any]:
         """Plain TOML-ready dict (without `source`); a Zernike lens's dict holds no key of the other kinds."""
@@ -124,13 +136,15 @@ class LensSpec:
 
 _SECTIONS = {"optics": OpticsSpec, "mask": MaskSpec, "sensor": SensorSpec, "simulation": SimulationSpec}
 # Sections that replace the Zernike mask as the lens's encoder, with their kind's name.
-ENCODER_SECTIONS = {"measured_psf": "measured-psf"}
+ENCODER_SECTIONS = {"measured_psf": "measured-psf", "height_map": "height-map"}
 KINDS = ("zernike", *ENCODER_SECTIONS.values())
 KIND_DESCRIPTIONS = {
     "zernike": "[mask] zernike_um: a phase mask of any number of Noll terms in um of glass (with bounds_um: "
                "co-designed)",
     "measured-psf": "[measured_psf] files, pixel_pitch_um: a PSF measured with a point source (one image per "
                     "channel or one for all), used as given; not co-designed",
+    "height-map": "[height_map] file, sample_pitch_um or diameter_mm: a freeform phase mask as a glass thickness "
+                  "map (the formats export-mask writes); not co-designed",
 }
 _TOP = {"name", "description", *_SECTIONS, *ENCODER_SECTIONS}
 
@@ -399,10 +413,64 @@ def _no_mask(raw: dict, section: str) -> None:
                         "optics of the lens, it takes no mask coefficients)")
 
 
-def _encoder(raw: dict, source: str) -> tuple[MaskSpec, MeasuredPsfSpec | None]:
+def _height_map(t: dict, base: Path, optics: OpticsSpec) -> HeightMapSpec:
+    from lenses.height_file import max_steps_um, read_height_map
+    _check_keys(t, {"file", "sample_pitch_um", "diameter_mm", "sha256"}, "height_map")
+    if "file" not in t:
+        raise LensSpecError("missing field height_map.file (a glass thickness map: .npy, .tif/.tiff in um, "
+                            ".dat Zemax Grid Sag or .csv, as export-mask writes)")
+    path = _file(t["file"], "height_map.file", base)
+    try:
+        data = read_height_map(path)
+    except ValueError as exc:
+        raise LensSpecError(f"height_map.file ({path}) {exc}") from None
+    n_y, n_x = data.height_um.shape
+    if "sample_pitch_um" in t and "diameter_mm" in t:
+        raise LensSpecError("height_map.sample_pitch_um and height_map.diameter_mm both state the grid; give one")
+    if "sample_pitch_um" in t:
+        pitch = _positive(t["sample_pitch_um"], "height_map.sample_pitch_um")
+    elif "diameter_mm" in t:  # the span of the longer side, edge node to edge node
+        pitch = _positive(t["diameter_mm"], "height_map.diameter_mm") * 1000.0 / (max(n_x, n_y) - 1)
+    elif data.spacing_um is not None:
+        pitch = data.spacing_um
+    else:
+        raise LensSpecError(f"missing field height_map.sample_pitch_um (the node spacing in um) or "
+                            f"height_map.diameter_mm (the span edge node to edge node): {path.suffix} files do not "
+                            "state their grid")
+    if data.spacing_um is not None and not math.isclose(pitch, data.spacing_um, rel_tol=1e-6):
+        raise LensSpecError(f"the grid stated in the spec ({pitch:.6g} um between nodes) is not the one "
+                            f"height_map.file states ({data.spacing_um:.6g} um); drop it or make it agree")
+    span_mm = (min(n_x, n_y) - 1) * pitch / 1000.0
+    if span_mm < optics.aperture_diameter_mm * (1 - 1e-9):
+        raise LensSpecError(f"height_map.file spans {span_mm:.6g} mm ({min(n_x, n_y)} nodes {pitch:.6g} um apart), "
+                            f"less than optics.aperture_diameter_mm = {optics.aperture_diameter_mm}; valid: a map "
+                            "covering the whole aperture")
+    radius = optics.aperture_diameter_mm * 500.0
+    yy, xx = np.meshgrid((np.arange(n_y) - (n_y - 1) / 2) * pitch, (np.arange(n_x) - (n_x - 1) / 2) * pitch,
+                         indexing="ij")
+    holes = int((np.isnan(data.height_um) & (np.hypot(xx, yy) <= radius - 1.5 * pitch)).sum())
+    if holes:
+        raise LensSpecError(f"height_map.file ({path}) has {holes} NaN nodes inside the clear aperture; valid: "
+                            "heights at every node of the aperture (NaN only outside it)")
+    # A step between neighbouring nodes of more than pi of phase at the shortest wavelength is not
+    # resolved by the map itself: no pupil grid could tell it from a smaller step the other way.
+    from lenses.materials import refractive_index
+    per_um = max(2 * math.pi * (refractive_index(optics.mask_material, w) - 1) / (w * 1e-3)
+                 for w in optics.wavelengths_nm)
+    step = max(max_steps_um(np.where(np.hypot(xx, yy) <= radius + pitch, data.height_um, np.nan)))
+    if step * per_um > math.pi:
+        raise LensSpecError(f"height_map.file ({path}) has a step of {step:.4g} um of glass between neighbouring "
+                            f"nodes, {step * per_um:.3g} rad at {min(optics.wavelengths_nm):g} nm: more than pi, "
+                            f"so the map aliases; valid: steps up to {math.pi / per_um:.4g} um (sample it finer)")
+    given = {"sha256": [t["sha256"]]} if isinstance(t.get("sha256"), str) else {k: t[k] for k in ("sha256",) if k in t}
+    return HeightMapSpec(file=str(path), sample_pitch_um=pitch, sha256=_checked_hashes(given, "height_map", [path])[0])
+
+
+def _encoder(raw: dict, source: str, optics: OpticsSpec
+             ) -> tuple[MaskSpec, MeasuredPsfSpec | None, HeightMapSpec | None]:
     given = [key for key in ENCODER_SECTIONS if key in raw]
     if not given:
-        return _mask(_section(raw, "mask")), None
+        return _mask(_section(raw, "mask")), None, None
     if len(given) > 1:
         raise LensSpecError(f"{' and '.join(f'[{k}]' for k in given)} are two encoders; give one of them")
     _no_mask(raw, given[0])
@@ -410,7 +478,9 @@ def _encoder(raw: dict, source: str) -> tuple[MaskSpec, MeasuredPsfSpec | None]:
     if not isinstance(table, dict):
         raise LensSpecError(f"[{given[0]}] must be a table, got {type(table).__name__}")
     base = Path(source).parent if source.endswith(".toml") else Path.cwd()
-    return MaskSpec(zernike_um=()), _measured_psf(table, base)
+    if given[0] == "height_map":
+        return MaskSpec(zernike_um=()), None, _height_map(table, base, optics)
+    return MaskSpec(zernike_um=()), _measured_psf(table, base), None
 
 
 def parse_spec(raw: dict, source: str = "") -> LensSpec:
@@ -429,7 +499,7 @@ def parse_spec(raw: dict, source: str = "") -> LensSpec:
     if not isinstance(description, str):
         raise LensSpecError(f"description must be a string, got {type(description).__name__}")
     optics, sensor = _optics(_section(raw, "optics")), _sensor(_section(raw, "sensor"))
-    mask, measured_psf = _encoder(raw, source)
+    mask, measured_psf, height_map = _encoder(raw, source, optics)
     # The electrons a pixel collects at radiance 1 scale with the aperture's area: the two fields
     # in range apart may still multiply past what the sensor model represents.
     electrons = sensor.white_level_photons * (optics.aperture_diameter_mm / sensor.reference_aperture_diameter_mm) ** 2
@@ -447,6 +517,7 @@ def parse_spec(raw: dict, source: str = "") -> LensSpec:
         simulation=_simulation(_section(raw, "simulation")),
         source=source,
         measured_psf=measured_psf,
+        height_map=height_map,
     )
 
 
