@@ -75,13 +75,15 @@ def fit_task(seed: int, lens: str, restorer: AttackerRef, deps: tuple[str, ...] 
 
 
 def run_directory(cfg: RunConfig, restorers: list[AttackerRef], readers: list[AttackerRef]) -> Path:
-    """Where a run's task results live: one folder per (configuration, code version). The code version
+    """Where a run's task results live: one folder per (configuration, code version). The lenses and
+    seeds are not part of it: each task's key names its own lens and seed (``Task.key``), so a run that
+    adds a lens or a seed finds the tasks of the ones already computed. The code version
     (``benchmark.store.provenance.code_version``) changes with any file the results depend on, not
     with docs or tests, so an interrupted run resumes after such a commit; each row still carries the
     commit of the process that computed it."""
-    key = config_hash({"version": TASK_VERSION, "code": code_version(), "lenses": cfg.lenses,
+    key = config_hash({"version": TASK_VERSION, "code": code_version(),
                        "restorers": [r.identity for r in restorers], "readers": [r.identity for r in readers],
-                       "scenes": cfg.scenes, "profile": cfg.profile.to_dict(), "seeds": cfg.seeds,
+                       "scenes": cfg.scenes, "profile": cfg.profile.to_dict(),
                        "device": cfg.device, "plate_format": cfg.plate_format, "frames": cfg.frames,
                        **({"chains": list(cfg.chains)} if cfg.chains is not None else {})})
     return Path(cfg.cache_dir) / "tasks" / key

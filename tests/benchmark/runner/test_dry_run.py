@@ -12,6 +12,8 @@ import attacks
 import benchmark
 from benchmark.results.schema import read_results
 
+pytestmark = pytest.mark.slow  # runs `python -m benchmark run --dry-run` and a run in subprocesses
+
 # The smoke plan of one fixed lens and one restorer, in plan order (benchmark.runner.planning.plan).
 TASKS = ["clean-utility_s0", "spectrum_s0", "sharp_s0", "lens_s0_ideal", "utility_s0_ideal", "bound_s0_ideal",
          "fit_s0_ideal_identity", "evaluate_s0_ideal"]
@@ -98,3 +100,16 @@ def test_a_result_with_failures_is_planned_for_compute(plans, monkeypatch):
     states = {t.key: t.state for t in benchmark.plan(lenses=["ideal"], attacks=[FailsToRestore], profile="smoke").tasks}
     assert states.pop("evaluate_s0_ideal") == "compute"  # a later run recomputes a result with failures
     assert set(states.values()) == {"cached"}
+
+
+def test_adding_a_lens_or_a_seed_keeps_the_tasks_already_computed(plans, monkeypatch):
+    # The task folder is keyed by what the tasks share, not by the lens list or the seeds: after the run of
+    # ideal, a run of defocus and ideal (in that order) and seeds 0 and 1 finds ideal's seed-0 tasks cached.
+    monkeypatch.setenv("PLB_CACHE", str(plans["root"] / "cache"))
+    wider = benchmark.plan(lenses=["defocus", "ideal"], attacks=["identity"], profile="smoke", seeds=[0, 1])
+    alone = benchmark.plan(lenses=["ideal"], attacks=["identity"], profile="smoke", seeds=[0])
+    cached = {t.key for t in wider.tasks if t.cached}
+    # (the tests before this one may have spoilt a result on purpose: compare with the single-lens plan)
+    assert cached == {t.key for t in alone.tasks if t.cached} and len(cached) >= len(TASKS) - 2
+    other = benchmark.plan(lenses=["ideal"], attacks=["identity"], profile="smoke", seeds=[0], frames=7)
+    assert wider.directory == alone.directory != other.directory  # what a task depends on still keys it
