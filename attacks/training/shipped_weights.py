@@ -35,7 +35,7 @@ from torch import Tensor
 __all__ = ["SHIPPED_DIR", "SUMMARY_ATOL", "Shipped", "ShippedWeightsError", "data_summary", "find_shipped",
            "key_text", "read_checked", "same_data", "write_shipped"]
 
-SHIPPED_DIR = Path(__file__).resolve().parent / "weights"
+SHIPPED_DIR = Path(__file__).resolve().parents[1] / "weights"  # attacks/weights/
 # Largest difference of two summaries of the same data. One ADC step (1/1023) on 0.01 % of the pixels
 # moves a quadrant mean (64 x 64 pixels at 128 px) by about 1e-7 (measured: <= 1e-6, the rounding).
 SUMMARY_ATOL = 1e-5

@@ -96,6 +96,7 @@ def test_shipped_weights_are_what_the_fit_trains_and_replace_it(fake_lens, tmp_p
     assert reseeded.trained is True and reseeded.shipped is None  # another seed: another key
 
 
+@pytest.mark.slow
 def test_the_shipped_quick_model_is_the_one_a_quick_run_asks_for_and_scores_its_record(tmp_path):
     from benchmark.publish.ship_attacker import check_scores, generic_context
     from benchmark.store.profiles import get_profile
@@ -110,3 +111,20 @@ def test_the_shipped_quick_model_is_the_one_a_quick_run_asks_for_and_scores_its_
     assert measured["psnr_in_db"] == pytest.approx(recorded["psnr_in_db"], abs=1e-3)
     assert measured["psnr_out_db"] == pytest.approx(recorded["psnr_out_db"], abs=0.05)
     assert measured["psnr_out_db"] > measured["psnr_in_db"] + 3.0  # it deblurs: not a random network
+
+
+def test_the_packages_own_weights_are_found_where_the_package_ships_them():
+    # Every provenance file the package ships names weights that find_shipped finds by its key, from the
+    # default folder: a folder one level off would make every run retrain what the package ships.
+    import json
+    from pathlib import Path
+
+    import attacks
+    from attacks.training.shipped_weights import SHIPPED_DIR, find_shipped
+    assert SHIPPED_DIR == Path(attacks.__file__).resolve().parent / "weights"
+    provenances = sorted(SHIPPED_DIR.glob("*.json"))
+    assert len(provenances) >= 4
+    for path in provenances:
+        prov = json.loads(path.read_text())
+        found = find_shipped(prov["kind"], prov["key"])
+        assert found is not None and found.path == path.with_suffix(".safetensors"), path.name
