@@ -264,6 +264,9 @@ class ReadHints:
     plate_boxes: list[list[tuple[float, float, float, float]]] | None = None
 
 
+_HINT_FIELDS = frozenset(f.name for f in dataclasses.fields(ReadHints))
+
+
 def box_iou(a: tuple[float, ...], b: tuple[float, ...]) -> float:
     """Intersection over union of two (x0, y0, x1, y1) boxes; 0 when the union is empty."""
     ix = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
@@ -373,10 +376,27 @@ class Restorer(Attack):
 class Reader(Attack):
     """An attacker that reads licence plates from images.
 
+    ``hints`` names the ``ReadHints`` fields the reader reads (``vehicle_boxes``, ``segment``,
+    ``plate_boxes``); the runner hands it those and leaves the others None, so a reader is told the
+    ground-truth boxes only when it declares it (an oracle stage), and its settings say so.
+
     ``stage_seconds`` holds the cumulative wall seconds a reader spent in each named stage of its reads
     (``lpdr``: vehicles, plates, ocr); the runner reports its growth over a chain as
     ``<stage>_s_per_image``. A reader without stages leaves it empty.
     """
+
+    hints: ClassVar[frozenset[str]] = frozenset()
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        unknown = set(cls.hints) - _HINT_FIELDS
+        if unknown:
+            raise TypeError(f"{cls.__qualname__}.hints names {sorted(unknown)}, which are not ReadHints fields; "
+                            f"valid: {sorted(_HINT_FIELDS)}")
+
+    def describe(self) -> dict[str, Any]:
+        """The base description and the hints the reader is given (sorted)."""
+        return {**super().describe(), "hints": sorted(self.hints)}
 
     @property
     def stage_seconds(self) -> dict[str, float]:

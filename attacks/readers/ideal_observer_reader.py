@@ -52,6 +52,7 @@ class IdealObserverReader(Reader):
     """
 
     name: ClassVar[str] = "ideal-observer"
+    hints: ClassVar[frozenset[str]] = frozenset({"plate_boxes"})
     threat_model: ClassVar[ThreatModel] = ThreatModel.LENS_ACCESS
     requires: ClassVar[frozenset[str]] = frozenset({"lens"})
     run_by_default: ClassVar[bool] = False  # seconds per plate: run it by name (--attack ideal-observer)

@@ -111,6 +111,7 @@ class LearnedReader(Reader):
     """
 
     name: ClassVar[str] = "learned-reader"
+    hints: ClassVar[frozenset[str]] = frozenset({"plate_boxes"})
     threat_model: ClassVar[ThreatModel] = ThreatModel.LENS_ACCESS
     # No required field: with no lens (the sharp scenes) it reads with its sharp start (``fit``).
     requires: ClassVar[frozenset[str]] = frozenset()

@@ -243,6 +243,7 @@ class Lpdr(PlateReaderBase):
     """
 
     name: ClassVar[str] = "lpdr"
+    hints: ClassVar[frozenset[str]] = frozenset({"segment"})
     vehicle_source: ClassVar[str] = "segmentation"
 
     def __init__(self, vehicle_scale: float = 0.5, **options: Any) -> None:
@@ -307,6 +308,7 @@ class LpdrOracle(PlateReaderBase):
     """LPDR with ground-truth vehicle boxes (``hints.vehicle_boxes``): the attacker's upper bound."""
 
     name: ClassVar[str] = "lpdr-oracle"
+    hints: ClassVar[frozenset[str]] = frozenset({"vehicle_boxes"})
     vehicle_source: ClassVar[str] = "oracle"
 
     def _vehicles(self, images: Tensor, hints: ReadHints | None) -> list[list[Box]]:

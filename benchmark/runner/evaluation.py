@@ -168,9 +168,11 @@ def read_plates(reader: attacks.Reader, images: torch.Tensor | Sequence[torch.Te
         for start, batch in shape_batches(images, batch_size):
             chunk = scenes[start:start + batch.shape[0]]
             chunks.append(chunk)
+            given = reader.hints  # only the hints the reader declares (attacks.base.Reader.hints)
             yield private(batch, device), attacks.ReadHints(
-                vehicle_boxes=[[v.box_xyxy for v in s.vehicles] for s in chunk], segment=segment,
-                plate_boxes=[[p.box_xyxy for p in s.plates] for s in chunk])
+                vehicle_boxes=[[v.box_xyxy for v in s.vehicles] for s in chunk] if "vehicle_boxes" in given else None,
+                segment=segment if "segment" in given else None,
+                plate_boxes=[[p.box_xyxy for p in s.plates] for s in chunk] if "plate_boxes" in given else None)
 
     # One call for every batch: a reader may share work across them (lpdr recognises all crops together).
     batches = inputs()

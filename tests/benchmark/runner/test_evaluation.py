@@ -154,3 +154,48 @@ def test_many_guesses_score_as_the_one_the_reader_trusts_most():
     top = max(reads, key=lambda r: r.score)
     (one,) = score_scene([top], scene)
     assert many == one and many.cer == levenshtein(top.text, "AB123CD") / 7
+
+
+def test_a_reader_is_handed_only_the_hints_it_declares():
+    import numpy as np
+
+    from benchmark.scenes.records import Plate, Scene, Vehicle
+
+    class Recorder(attacks.Reader):
+        name = "recorder"
+        threat_model = attacks.ThreatModel.SENSOR_ACCESS
+
+        def __init__(self):
+            self.seen = []
+
+        def read(self, images, hints=None):
+            self.seen.append(hints)
+            return [[] for _ in images]
+
+    class PlateOracle(Recorder):
+        name = "plate-oracle"
+        hints = frozenset({"plate_boxes"})
+
+    scene = Scene(np.zeros((16, 32, 3), np.float32), np.zeros((16, 32), np.uint8),
+                  [Plate("AB123CD", (2.0, 2.0, 12.0, 6.0), 0, 1.0)], [Vehicle(13, (0.0, 0.0, 20.0, 10.0))], 0, "s")
+    images = torch.zeros(1, 3, 16, 32)
+    blind, oracle = Recorder(), PlateOracle()
+    for reader in (blind, oracle):
+        read_plates(reader, images, [scene], 1, "cpu", segment=lambda x: x[:, 0].long())
+    (given,) = blind.seen
+    assert given.vehicle_boxes is None and given.segment is None and given.plate_boxes is None
+    (given,) = oracle.seen
+    assert given.plate_boxes == [[(2.0, 2.0, 12.0, 6.0)]] and given.vehicle_boxes is None and given.segment is None
+    assert blind.describe()["hints"] == [] and oracle.describe()["hints"] == ["plate_boxes"]
+
+
+def test_a_hint_that_is_no_readhints_field_is_refused_at_class_creation():
+    with pytest.raises(TypeError, match=r"hints names \['answers'\], which are not ReadHints fields; valid: "
+                                        r"\['plate_boxes', 'segment', 'vehicle_boxes'\]"):
+        class Greedy(attacks.Reader):
+            name = "greedy"
+            threat_model = attacks.ThreatModel.SENSOR_ACCESS
+            hints = frozenset({"answers"})
+
+            def read(self, images, hints=None):
+                return [[] for _ in images]

@@ -38,6 +38,7 @@ class Echo(Reader):
     """Reads every ground-truth vehicle box as the same plate."""
     name: ClassVar[str] = "echo"
     threat_model: ClassVar[ThreatModel] = ThreatModel.SENSOR_ACCESS
+    hints: ClassVar[frozenset[str]] = frozenset({"vehicle_boxes"})
 
     def read(self, images, hints=None):
         boxes = hints.vehicle_boxes if hints and hints.vehicle_boxes else [[] for _ in images]
