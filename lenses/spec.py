@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from lenses.materials import MATERIALS
+from lenses.materials import MATERIALS, refractive_index
 from common.plugins import suggest
 from lenses.zernike import zernike_noll
 
@@ -454,13 +454,12 @@ def _height_map(t: dict, base: Path, optics: OpticsSpec) -> HeightMapSpec:
                             "heights at every node of the aperture (NaN only outside it)")
     # A step between neighbouring nodes of more than pi of phase at the shortest wavelength is not
     # resolved by the map itself: no pupil grid could tell it from a smaller step the other way.
-    from lenses.materials import refractive_index
-    per_um = max(2 * math.pi * (refractive_index(optics.mask_material, w) - 1) / (w * 1e-3)
-                 for w in optics.wavelengths_nm)
+    per_um, wavelength = max((2 * math.pi * (refractive_index(optics.mask_material, w) - 1) / (w * 1e-3), w)
+                             for w in optics.wavelengths_nm)
     step = max(max_steps_um(np.where(np.hypot(xx, yy) <= radius + pitch, data.height_um, np.nan)))
     if step * per_um > math.pi:
         raise LensSpecError(f"height_map.file ({path}) has a step of {step:.4g} um of glass between neighbouring "
-                            f"nodes, {step * per_um:.3g} rad at {min(optics.wavelengths_nm):g} nm: more than pi, "
+                            f"nodes, {step * per_um:.3g} rad at {wavelength:g} nm: more than pi, "
                             f"so the map aliases; valid: steps up to {math.pi / per_um:.4g} um (sample it finer)")
     given = {"sha256": [t["sha256"]]} if isinstance(t.get("sha256"), str) else {k: t[k] for k in ("sha256",) if k in t}
     return HeightMapSpec(file=str(path), sample_pitch_um=pitch, sha256=_checked_hashes(given, "height_map", [path])[0])
