@@ -53,7 +53,19 @@ def attempt(attacker: str, stage: str, work: Callable[[], T], budget_s: float | 
         raise
     except BaseException as exc:  # noqa: BLE001 - a broken plugin must not take the run down
         log.warning("attacker %r failed at %s: %s: %s", attacker, stage, type(exc).__name__, exc)
-        return RowError(attacker, stage, f"{type(exc).__name__}: {exc}")
+        return RowError(attacker, stage, shortened(f"{type(exc).__name__}: {exc}"))
+
+
+# A row's error says what failed in a sentence or two; a library's own dump (torch's dispatcher lists
+# every backend, kilobytes of it) goes to the log whole.
+MAX_ERROR_CHARS = 500
+
+
+def shortened(message: str, limit: int = MAX_ERROR_CHARS) -> str:
+    """`message` cut to `limit` characters, saying how much more the log holds."""
+    if len(message) <= limit:
+        return message
+    return f"{message[:limit].rstrip()} ... ({len(message) - limit} more characters in the log)"
 
 
 def describe(attacker: attacks.Attack) -> dict | RowError:

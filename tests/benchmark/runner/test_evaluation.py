@@ -199,3 +199,17 @@ def test_a_hint_that_is_no_readhints_field_is_refused_at_class_creation():
 
             def read(self, images, hints=None):
                 return [[] for _ in images]
+
+
+def test_a_long_error_is_cut_in_the_row_and_kept_whole_in_the_log(caplog):
+    dump = "Could not run 'aten::add' with arguments from the 'SparseCPU' backend. " + "backend list " * 400
+
+    def fails():
+        raise NotImplementedError(dump)
+
+    with caplog.at_level("WARNING"):
+        error = attempt("sparse", "restore", fails)
+    assert isinstance(error, RowError) and len(error.message) < 600
+    assert error.message.startswith("NotImplementedError: Could not run 'aten::add'")
+    assert error.message.endswith(f"({len('NotImplementedError: ' + dump) - 500} more characters in the log)")
+    assert dump.strip() in caplog.text
