@@ -10,6 +10,8 @@ import re
 import tokenize
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("common", "lenses", "attacks", "benchmark", "tests")
 
@@ -134,6 +136,7 @@ def stale_pointers(text: str, where: Path) -> list[str]:
     return found
 
 
+@pytest.mark.slow
 def test_every_file_and_module_named_in_source_tests_and_docs_exists():
     found = [f"{path.relative_to(ROOT)} {hit}" for path in scanned_files() for hit in stale_pointers(prose(path), path)]
     assert found == []

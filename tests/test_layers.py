@@ -8,6 +8,7 @@ hidden inside a function counts as much as one at the top.
 """
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -32,7 +33,13 @@ def modules() -> dict[str, Path]:
 
 
 def import_graph() -> dict[str, set[str]]:
-    """Module -> our modules it imports (the most specific module each import names)."""
+    """Module -> our modules it imports (the most specific module each import names), a copy of its own for
+    each caller: the tree is parsed once per session."""
+    return {name: set(targets) for name, targets in _import_graph().items()}
+
+
+@functools.cache
+def _import_graph() -> dict[str, set[str]]:
     known = modules()
     graph = {}
     for name, path in known.items():

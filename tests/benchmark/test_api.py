@@ -88,6 +88,7 @@ def test_the_readme_shows_the_tested_example():
         assert block == readme_example()
 
 
+@pytest.mark.slow
 def test_example_table_has_one_row_per_lens_attack_seed(example):
     namespace, printed = example
     results, table = namespace["results"], namespace["table"]
@@ -103,6 +104,7 @@ def test_example_table_has_one_row_per_lens_attack_seed(example):
     assert "wiener-known-psf>lpdr-oracle" in printed
 
 
+@pytest.mark.slow
 def test_example_table_is_the_rows_with_their_intervals(example):
     results, table = example[0]["results"], example[0]["table"]
     for row, (_, line) in zip(results.rows, table.iterrows()):
@@ -117,6 +119,7 @@ def test_example_table_is_the_rows_with_their_intervals(example):
         assert line[absent].isna().all()
 
 
+@pytest.mark.slow
 def test_example_rows_validate_against_the_schema(example):
     results = example[0]["results"]
     for row in results.rows:
@@ -125,6 +128,7 @@ def test_example_rows_validate_against_the_schema(example):
     assert results.meta["profile"] == get_profile("smoke").to_dict() and results.out is None
 
 
+@pytest.mark.slow
 def test_results_read_back_give_the_same_table(example, tmp_path):
     results = example[0]["results"]
     again = benchmark.Results.read(results.write(tmp_path / "results.json"))
@@ -152,6 +156,7 @@ def flat_psnr_db(level: float) -> float:
                                                   data_range=1.0) for s in scenes]))
 
 
+@pytest.mark.slow
 def test_an_attacker_class_is_scored_like_the_registered_attacker_it_equals(object_runs):
     first, _ = object_runs
     ours, raw = _restorer_row(first, "test-passthrough"), _restorer_row(first, "raw")
@@ -160,6 +165,7 @@ def test_an_attacker_class_is_scored_like_the_registered_attacker_it_equals(obje
     assert first.settings[ours.settings_hash]["restorer"]["class"].endswith(":Passthrough")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("run_index, level", [(0, 0.25), (1, 0.75)])
 def test_an_instance_keeps_its_options(object_runs, run_index, level):
     results = object_runs[run_index]
@@ -222,6 +228,7 @@ def test_load_lens_and_lists():
         benchmark.load_lens("idael")
 
 
+@pytest.mark.slow
 def test_import_benchmark_stays_cheap():
     code = "import sys, benchmark; assert 'torch' not in sys.modules and 'benchmark.api' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)

@@ -7,6 +7,8 @@ import pytest
 
 from benchmark.results.schema import read_results
 
+pytestmark = pytest.mark.slow  # runs `python -m benchmark` in subprocesses
+
 PROVENANCE = {"git_commit", "packages", "device", "threads", "wall_s", "date"}
 
 

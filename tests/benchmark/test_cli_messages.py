@@ -26,6 +26,7 @@ def _python(code: str) -> subprocess.CompletedProcess:
 
 # ---- help and list --------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_help_imports_no_torch_and_shows_examples():
     """`python -m benchmark --help` answers without importing torch (3.2 s -> 0.13 s on a quiet
     2-core machine); the package's own import stays light too, its oneDNN bound set all the same."""
@@ -187,6 +188,7 @@ def test_export_mask_to_a_read_only_folder_names_it(tmp_path, capsys):
     assert str(folder) in err and "Permission denied" in err and "write elsewhere" in err
 
 
+@pytest.mark.slow
 def test_a_cache_that_cannot_be_written_is_a_sentence_naming_it(tmp_path):
     blocker = tmp_path / "not_a_folder"
     blocker.write_text("")

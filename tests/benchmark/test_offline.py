@@ -21,6 +21,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # a smoke run in a subprocess under strace
+
 ROOT = Path(__file__).resolve().parents[2]
 
 SITECUSTOMIZE = '''

@@ -73,6 +73,7 @@ def board(tmp_path) -> Path:
     return copy
 
 
+@pytest.mark.slow
 def test_render_deletes_an_orphan_and_a_stale_image(board):
     stale_run_chart = board / "samples" / "plate_width__quick__gp+os.png"  # one chart per historical run
     no_entry = board / "samples" / "no-such-lens__quick.png"  # a sample of a lens without an entry

@@ -17,9 +17,9 @@ from benchmark.results.schema import Row, Units
 
 CHROMIUM, CHROMEDRIVER = shutil.which("chromium"), shutil.which("chromedriver")
 webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed (pip install -e '.[test]')")
-pytestmark = pytest.mark.skipif(
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(  # slow: drives a headless Chromium
     CHROMIUM is None or CHROMEDRIVER is None,
-    reason="no headless browser: install Debian's chromium and chromium-driver (.ci/run does)")
+    reason="no headless browser: install Debian's chromium and chromium-driver (.ci/run does)")]
 
 FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",

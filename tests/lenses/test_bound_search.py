@@ -54,6 +54,7 @@ def test_trace_bound_is_jensen_on_the_trace_of_the_block_matrices(width):
                  >= plate_bits_per_channel(psf, spectrum, width, nsr, "block") * (1 - 1e-12)).all())
 
 
+@pytest.mark.slow
 def test_normal_lenses_get_the_widths_and_rows_of_the_exact_search():
     spectrum = smooth_spectrum()
     by_trace = 0
@@ -75,6 +76,7 @@ def test_normal_lenses_get_the_widths_and_rows_of_the_exact_search():
     assert by_trace > 0, "some width must have been certified by the trace bound, or the comparison proves nothing"
 
 
+@pytest.mark.slow
 def test_a_very_dark_lens_is_certified_without_building_block_matrices(monkeypatch):
     spectrum = smooth_spectrum()
     dark = builtin("ideal", aperture_mm=0.01)  # that lens: 2.7e-6 of the light per unit radiance

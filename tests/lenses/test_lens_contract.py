@@ -44,6 +44,7 @@ def test_every_spec_file_keeps_the_contract(spec):
     check_contract(lenses.load(spec))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", REGISTERED)
 def test_every_registered_lens_keeps_the_contract(name, cache):
     check_contract(lenses.load(name, profile=get_profile("smoke"), seed=0, device="cpu", cache_dir=cache))

@@ -75,6 +75,7 @@ def test_worst_sag_by_pairs_agrees_with_corners(monkeypatch):
     assert worst_sag_um(box) == pytest.approx(corners, rel=1e-2)
 
 
+@pytest.mark.slow
 def test_fifteen_bounded_terms_check_their_relief():
     bounds = [[0.0, 0.0]] + [[-0.2, 0.2]] * 14
     raw = {"name": "b", "mask": {"zernike_um": [0.0] * 15, "bounds_um": bounds, "max_sag_um": 1.0}}

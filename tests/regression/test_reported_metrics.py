@@ -19,6 +19,8 @@ from benchmark.publish import report as leaderboard_report
 from benchmark.results.entries import Entry
 from benchmark.results.schema import Row, read_results
 
+pytestmark = pytest.mark.slow  # regression re-checks: published figures re-run in subprocesses
+
 ENTRIES = leaderboard.LEADERBOARD / "entries"
 # Timing and throughput depend on the machine and its load, not on the code's numbers.
 SKIP = {"fit_s", "images_per_s", "wall_s", "threads"}

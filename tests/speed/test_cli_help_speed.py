@@ -9,6 +9,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.slow  # times `python -m benchmark --help` in subprocesses
+
 TARGET_S = 2.0
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -32,6 +32,7 @@ def street(plates: list[tuple[str, tuple[int, int, int, int], tuple[int, int, in
     return torch.from_numpy(image).permute(2, 0, 1)[None].float()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("lens_name, n_plates", [("ideal", 3), ("defocus", 1)])
 def test_reads_clean_synthetic_plates_exactly(lens_name, n_plates):
     # The sharp lens makes the search hardest (a misplaced glyph scores very badly), so it reads all

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 
+import pytest
 import torch
 
 from attacks.readers.plates import ocr as plate_ocr
@@ -33,6 +34,7 @@ def test_onnx_features_agree_with_torch_and_do_not_depend_on_the_batch():
     assert ocr_onnx.feature_extractor(model, "onnx") is features  # one session per recognizer
 
 
+@pytest.mark.slow
 def test_the_same_confident_reads_with_either_backend():
     """Reads agree except where the recognizer is unsure. The quantized BiLSTM tail scales its
     activations by their range and rounds them to 8 bits, so features that differ by 1e-6 of their
@@ -64,6 +66,7 @@ def test_a_failed_export_falls_back_to_torch(monkeypatch, caplog):
 DELAY_S = 0.5
 
 
+@pytest.mark.slow
 def test_auto_keeps_whichever_backend_the_probe_times_faster(monkeypatch):
     # An injected delay (DELAY_S, more than either takes here) in one backend: "auto" keeps the other, decides once, and says what it timed.
     from types import SimpleNamespace

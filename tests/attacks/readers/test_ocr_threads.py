@@ -24,6 +24,7 @@ def _crops(n_scenes: int = 2) -> list[np.ndarray]:
     return [image[y0:y1, x0:x1] for image, trace in zip(rgb, reader.last_trace) for _, (x0, y0, x1, y1) in trace.plates]
 
 
+@pytest.mark.slow
 def test_reads_on_one_thread_equal_reads_on_the_callers_threads(monkeypatch):
     ocr = load_easyocr(False)
     crops = _crops()

@@ -28,6 +28,8 @@ from benchmark.runner.config import RunConfig
 from benchmark.runner.sensing import sense, to_tensor, train_pairs_factory
 from benchmark.scenes import load_scenes
 
+pytestmark = pytest.mark.slow  # fits every restorer on two lenses
+
 PROFILE = PROFILES["smoke"]
 RESTORERS = ["wiener-known-psf", "richardson-lucy-known-psf", "nafnet-known-pairs", "nafnet-generic"]
 MARGIN_ON_DEFOCUS_DB = {"wiener-known-psf": 2.0, "richardson-lucy-known-psf": 2.0, "nafnet-known-pairs": 1.0}

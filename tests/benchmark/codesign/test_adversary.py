@@ -48,6 +48,7 @@ def test_skips_reach_the_output_at_full_resolution():
     assert float(g_skip[0, :, 16, 16].abs().sum()) > 10 * float(g_plain[0, :, 16, 16].abs().sum())
 
 
+@pytest.mark.slow
 def test_pretraining_beats_the_white_balanced_image_by_the_margin_on_smoke(tmp_path, monkeypatch):
     profile = PROFILES["smoke"]
     lens = _start_lens()

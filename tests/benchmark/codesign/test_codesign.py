@@ -15,6 +15,8 @@ from benchmark.codesign.trainer import CoDesign, TrainingDivergedError
 from benchmark.store.profiles import PROFILES
 from lenses.spec import load_spec
 
+pytestmark = pytest.mark.slow  # most tests train a co-design step or more (5-25 s each)
+
 TINY = dataclasses.replace(PROFILES["smoke"], image_size=(64, 128), n_train=2, train_crop=(48, 48), batch_size=2,
                            codesign_steps=2, pretrain_steps=1, utility_model="tiny", adversary_width=4)
 

@@ -19,6 +19,8 @@ from benchmark.store.profiles import PROFILES
 from benchmark.codesign.utility import pretrain
 from lenses.spec import load_spec
 
+pytestmark = pytest.mark.slow  # each case co-designs a tiny lens again (3-12 s)
+
 # The smallest profile that runs every part: clean pre-training, adversary pre-training, co-design.
 TINY = dataclasses.replace(PROFILES["smoke"], image_size=(64, 128), n_train=2, train_crop=(48, 48), batch_size=2,
                            codesign_steps=2, pretrain_steps=1, utility_model="tiny", adversary_width=4)

@@ -18,6 +18,8 @@ from benchmark.codesign.trainer import CoDesign
 from benchmark.store.profiles import PROFILES
 from lenses.spec import load_spec
 
+pytestmark = pytest.mark.slow  # two spawned gloo ranks co-design (about a minute)
+
 # test_codesign's tiny profile with two rows per rank: CPU kernels lay out a one-row activation
 # differently, and dropout masks follow the layout (see distributed._GlobalDropout).
 TINY = dataclasses.replace(PROFILES["smoke"], image_size=(64, 128), n_train=2, train_crop=(48, 48), batch_size=4,

@@ -19,6 +19,8 @@ from benchmark.codesign.utility.scoring import confusion_matrix, predict, scores
 from benchmark.codesign.utility.segformer import build_segformer, segment_logits
 from benchmark.codesign.utility.segformer_onnx import segformer_engine, weights_sha256
 
+pytestmark = pytest.mark.slow  # ONNX exports of SegFormer (3-10 s each)
+
 
 @pytest.fixture(autouse=True)
 def fresh_engines(monkeypatch):

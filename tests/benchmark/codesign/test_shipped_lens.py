@@ -40,6 +40,7 @@ def test_the_shipped_gp_is_the_run_a_quick_gp_run_asks_for(fresh_cache):
     assert _provenance(run.directory.name)["config"] == json.loads(json.dumps(run.config))
 
 
+@pytest.mark.slow
 def test_a_fresh_cache_loads_the_shipped_gp_and_its_known_pairs_nafnet(fresh_cache):
     run = codesign_run("gp", QUICK, 0)
     assert not run.directory.exists()

@@ -35,6 +35,7 @@ def _shipped_quick() -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_shipped_weights_reach_their_recorded_miou():
     weights = _shipped_quick()
     provenance = json.loads(provenance_path_for(weights).read_text())
@@ -146,6 +147,7 @@ def test_rare_class_crops_balance_classes_and_batches_are_pure_functions_of_the_
     assert x1.dtype == torch.float32 and x1.shape == (16, 3, 32, 32) and y1.shape == (16, 32, 32)
 
 
+@pytest.mark.slow
 def test_pretrain_command_exports_weights_that_load_and_reproduce_their_record(tmp_path, monkeypatch):
     monkeypatch.setenv("PLB_CACHE", str(tmp_path / "cache"))
     assert main(["--profile", "smoke", "--out", str(tmp_path / "w"), "--dir", str(tmp_path / "lb")]) == 0

@@ -176,6 +176,7 @@ def _lens_row(lens: str, seed: int) -> Row:
     return Row(kind="lens", lens=lens, attack="lens", seed=seed, profile=PROFILE, scenes="synthetic", metrics={})
 
 
+@pytest.mark.slow
 def test_entries_of_different_trainer_versions_are_not_compared():
     rng = np.random.default_rng(1)
     union = rng.integers(0, 5000, size=(32, 19))

@@ -43,6 +43,7 @@ def test_task_weights_count_each_task_once_at_its_estimate():
     bar.close()
 
 
+@pytest.mark.slow
 def test_publish_replaces_entries_whole_and_resumes_from_the_cache(tmp_path, capsys):
     board, out = tmp_path / "board", tmp_path / "run"
     (board / "entries").mkdir(parents=True)

@@ -13,6 +13,7 @@ from benchmark.store.profiles import get_profile
 from benchmark.results.schema import Results, write_results
 
 
+@pytest.mark.slow
 def test_publishing_a_finished_run_gives_the_entry_run_publish_gives(tmp_path):
     out = tmp_path / "run"
     results = benchmark.run(["defocus"], ["identity", "lpdr-oracle"], profile="smoke", out=out)

@@ -27,6 +27,7 @@ def entries():
     return [read_entry(LEADERBOARD / "entries" / name) for name in ENTRIES]
 
 
+@pytest.mark.slow
 def test_one_line_per_entry_and_one_cell_per_column(entries):
     columns = table_columns(None, entries)
     lines = main_table(entries).splitlines()
@@ -37,6 +38,7 @@ def test_one_line_per_entry_and_one_cell_per_column(entries):
     assert all(len(cells(line)) == len(columns) for line in lines[2:])
 
 
+@pytest.mark.slow
 def test_the_ensemble_cell_is_its_pooled_reads_with_a_wilson_interval(entries):
     header = cells(main_table(entries).splitlines()[0])
     for entry, line in zip(entries, main_table(entries).splitlines()[2:]):

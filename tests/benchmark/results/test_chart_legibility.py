@@ -146,6 +146,7 @@ def test_sample_grid_scores_each_image_shown():
     assert len({t.split("\n")[1] for n, t in titles.items() if n.startswith("restorer")}) == 5  # each its own
 
 
+@pytest.mark.slow
 def test_plate_gallery_reads_sit_under_crops_and_a_caption_explains_them():
     """Eight sources (sharp, sensor, six restorers): two blocks of at most MAX_COLUMNS, each titled."""
     scenes = load_scenes("synthetic", "val", 4, (512, 1024), 0)
@@ -184,6 +185,7 @@ def test_same_data_render_byte_identical_pngs(tmp_path, chart):
     assert write(tmp_path / "a.png").read_bytes() == write(tmp_path / "b.png").read_bytes()
 
 
+@pytest.mark.slow
 def test_ideal_observer_chart_of_the_published_leaderboard_is_legible_at_page_width(tmp_path):
     """The leaderboard's own study and entries (12 lenses, up to 24 readers and chains a lens): lens
     panels three to a row, each legend under its panel and at most MAX_READERS readers in colour."""

@@ -3,7 +3,11 @@
 import subprocess
 import sys
 
+import pytest
+
 from benchmark.results.schema import read_results
+
+pytestmark = pytest.mark.slow  # two smoke runs of `python -m benchmark` in subprocesses
 
 # Timing, and provenance that names when and at which commit rather than what was measured.
 TIMING = {"fit_s", "images_per_s", "wall_s", "date", "git_commit"}

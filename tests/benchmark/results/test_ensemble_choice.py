@@ -72,6 +72,7 @@ def test_thresholds_are_strict():
     assert effects["b"].plate_points == pytest.approx(1.5) and effects["b"].matters
 
 
+@pytest.mark.slow
 def test_removal_effects_agree_with_the_ensembles_themselves():
     entries = study.quick_entries(LEADERBOARD)
     entry = next(e for _, e in entries if e.lens == "os")
@@ -87,6 +88,7 @@ def test_removal_effects_agree_with_the_ensembles_themselves():
             assert effect.best_scenes == scenes.best_counts[scenes.restorers.index(effect.attack)]
 
 
+@pytest.mark.slow
 def test_the_proposed_constant_is_what_the_rule_selects_on_the_published_entries():
     entries = [e for _, e in study.quick_entries(LEADERBOARD)]
     assert entries and all(e.profile == "quick" for e in entries)
@@ -99,6 +101,7 @@ def test_the_proposed_constant_is_what_the_rule_selects_on_the_published_entries
     assert "lpdr" in PROPOSED_ENSEMBLE and f"{strongest_restorer(effects)}>lpdr" in PROPOSED_ENSEMBLE
 
 
+@pytest.mark.slow
 def test_the_docs_page_is_rendered_from_the_published_entries():
     text = study.DOC.read_text()
     date = study.date_of(text)

@@ -66,6 +66,7 @@ def defocus_curves() -> list[CeilingCurve]:
     return ceiling_curves(lenses.load("defocus"), (6, 12), frames=(1, 8), precision=coarse, seed=0)
 
 
+@pytest.mark.slow
 def test_more_frames_never_lower_the_ceiling(defocus_curves):
     one, eight = defocus_curves
     # Same plate draws for both frame counts; 8 frames average the noise down by sqrt(8).
@@ -73,6 +74,7 @@ def test_more_frames_never_lower_the_ceiling(defocus_curves):
     assert (eight.plate_ceiling > one.plate_ceiling).all()
 
 
+@pytest.mark.slow
 def test_plate_ceiling_is_the_least_block_and_certified_width_follows_it(defocus_curves):
     curve = defocus_curves[0]
     np.testing.assert_array_equal(curve.plate_ceiling, np.fmin(curve.position_ceiling.min(1), curve.pair_ceiling))

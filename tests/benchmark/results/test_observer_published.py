@@ -20,6 +20,8 @@ from benchmark.store.profiles import get_profile
 from benchmark.results.schema import Row
 from lenses import Lens, parse_spec
 
+pytestmark = pytest.mark.slow  # ideal-observer ceilings of a lens, computed (5-7 s each)
+
 STUDY = json.loads((LEADERBOARD / "studies" / "ideal_observer.json").read_text())
 DEFOCUS_SPEC = STUDY["lenses"]["defocus"]["lens_spec"]
 

@@ -103,6 +103,7 @@ def test_paired_accuracy_difference_square_and_add_when_uncorrelated():
     assert result.n == n
 
 
+@pytest.mark.slow
 def test_paired_accuracy_interval_covers_the_true_difference():
     # Correlated reads (both readers find the same easy plates): acc 0.5 vs 0.4, 60 plates.
     probabilities = [0.3, 0.2, 0.1, 0.4]  # both, only A, only B, neither

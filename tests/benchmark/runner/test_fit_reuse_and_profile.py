@@ -17,6 +17,8 @@ from benchmark.runner import runner
 from benchmark.store.profiles import get_profile
 from benchmark.runner.config import RunConfig
 
+pytestmark = pytest.mark.slow  # two in-process smoke runs (about 2 min)
+
 
 @pytest.fixture(scope="module")
 def two_runs(tmp_path_factory):

@@ -41,6 +41,7 @@ def stderr():
     return {mode: read_one_plate(mode) for mode in ("plain", "silenced")}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("text", TEXTS)
 def test_reading_a_plate_prints_none_of_the_known_warnings(stderr, text):
     assert text in stderr["plain"], "the warning no longer appears: drop its filter from KNOWN_WARNINGS"

@@ -15,6 +15,8 @@ import pytest
 
 from benchmark.runner.diagnostics import native_memory
 
+pytestmark = pytest.mark.slow  # measures memory in fresh Python subprocesses
+
 SHAPES = 300  # distinct input shapes, more than the bounded capacity (128 primitives)
 GROWTH = textwrap.dedent(f"""
     import benchmark, os, torch  # importing benchmark bounds the cache

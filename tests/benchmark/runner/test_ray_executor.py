@@ -9,6 +9,8 @@ import pytest
 
 from benchmark.results.schema import read_results
 
+pytestmark = pytest.mark.slow  # smoke runs of `python -m benchmark` in subprocesses
+
 pytest.importorskip("ray", reason='the Ray executor is an optional extra: pip install ".[ray]"')
 
 # Timing, and provenance that names when and at which commit rather than what was measured.

@@ -8,6 +8,7 @@ from __future__ import annotations
 import gc
 import weakref
 
+import pytest
 import torch
 
 import attacks
@@ -31,6 +32,7 @@ class _Blind(attacks.Reader):
 READERS = [ReadyReader(_Blind(), None, {"name": "blind"})]
 
 
+@pytest.mark.slow
 def test_the_kept_scene_does_not_hold_the_restored_batch():
     cfg = RunConfig(["fake"], None, "synthetic", get_profile("smoke"), [0])
     scenes = load_scenes("synthetic", "val", 3, (64, 128), 0)
@@ -137,6 +139,7 @@ class _FrameCounter(attacks.Restorer):
         return sensor.flip(-1)
 
 
+@pytest.mark.slow
 def test_scored_frames_are_gone_before_the_windows_are_restored():
     """A restorer's 64 restored frames (about 400 MB on quick) are scored first and dropped (but the
     sample picture's one) before its plate windows are restored and read."""

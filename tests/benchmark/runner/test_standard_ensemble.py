@@ -58,6 +58,7 @@ def _evaluate(chains):
     return [r.attack for r in out.rows], read, unread, sensor.shape
 
 
+@pytest.mark.slow
 def test_only_the_chains_of_the_ensemble_are_read_and_their_restorers_windows_restored():
     attacks_measured, read, unread, frames = _evaluate(("read", "unread", "blind", "read>blind"))
     assert attacks_measured == ["read", "unread", "blind", "read>blind"]

@@ -54,6 +54,7 @@ def test_pixel_density_scales_with_plate_width():
     assert seen[-1] == pytest.approx(0.02, rel=0.15)
 
 
+@pytest.mark.slow
 def test_training_plates_give_a_falling_spectrum_and_use_only_the_train_split(monkeypatch):
     splits = []
     real = ps.load_scene

@@ -135,6 +135,7 @@ def test_shape_batches_keep_order_and_group_equal_shapes():
     assert got == [(0, (2, 3, 4, 8)), (2, (1, 3, 4, 8)), (3, (1, 3, 6, 8)), (4, (2, 3, 4, 8))]
 
 
+@pytest.mark.slow
 def test_quick_plate_set_fills_every_width_bin_from_8_to_64_px(tmp_path):
     """Counted from the scene generator alone (no lens): the quick profile's plate set of seed 0 holds
     50 scored plates in each width bin from 8 to 64 px, and no wider bin more than 25."""

@@ -46,6 +46,7 @@ def test_a_curve_still_rising_gives_the_last_checkpoint_and_a_late_rise_is_not_m
     assert nafnet_steps.flattening_step(_records(steps, plateau_then_rise)) == 100
 
 
+@pytest.mark.slow
 def test_the_study_fit_is_the_attacker_s_fit(tmp_path):
     profile = dataclasses.replace(get_profile("smoke"), restorer_steps=12)
     body = nafnet_steps.run(tmp_path / "study.json", tmp_path / "chart.png", profile, "defocus", 0, (4, 8, 12))

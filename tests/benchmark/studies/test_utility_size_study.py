@@ -11,6 +11,8 @@ from benchmark.store.profiles import get_profile
 from benchmark.studies import utility_size
 from benchmark.codesign.utility import pretrain
 
+pytestmark = pytest.mark.slow  # trains utility-net variants (15-20 s each)
+
 
 def test_variants_are_trained_to_the_recipe_measured_compared_and_charted(tmp_path):
     profile = get_profile("smoke")
