@@ -50,7 +50,7 @@ def psnr_by_lens(scenes, tmp_path_factory) -> dict[str, dict[str, float]]:
         lens = lenses.load(lens_name)
         sensor = sense(lens, scenes, PROFILE.batch_size, 0, "cpu")
         ctx = attacks.FitContext(lens=lens, train_pairs=train_pairs_factory(lens, cfg, 0),
-                                 artifacts=ArtifactCache(cache), seed=0, profile=PROFILE)
+                                 artifacts=ArtifactCache(cache), seed=0, budget=PROFILE.attack_budget())
         results[lens_name] = {}
         for name in ["raw", *RESTORERS]:
             # The torch backend: ONNX export and timing cost time here and are tested elsewhere.
