@@ -116,6 +116,7 @@ def rows_of(out):
     return {(r.lens, r.attack): r for r in read_results(out / "results.json").rows}
 
 
+@pytest.mark.slow
 def test_a_killed_run_leaves_every_finished_tasks_rows_on_disk(runs):
     assert runs["killed"].returncode == -signal.SIGKILL, runs["killed"].stderr[-2000:]
     partial = read_results(runs["out1"] / "results.partial.json")
@@ -125,6 +126,7 @@ def test_a_killed_run_leaves_every_finished_tasks_rows_on_disk(runs):
     assert not (runs["out1"] / "results.json").exists()
 
 
+@pytest.mark.slow
 def test_the_rerun_resumes_from_the_finished_tasks_and_completes(runs):
     assert runs["resumed"].returncode == 1, runs["resumed"].stderr[-3000:]  # exit and desc fail
     assert len(runs["task_files"]) >= 4  # the killed run's finished tasks (lens, utility, bound, ...) ...
@@ -134,6 +136,7 @@ def test_the_rerun_resumes_from_the_finished_tasks_and_completes(runs):
     assert rows_of(runs["out2"])["ideal", "kill-once"].ok
 
 
+@pytest.mark.slow
 def test_a_restorer_writing_into_its_input_changes_no_other_score(runs):
     rows = rows_of(runs["out2"])
     before, after = rows["ideal", "copy-before"], rows["ideal", "copy-after"]
@@ -142,6 +145,7 @@ def test_a_restorer_writing_into_its_input_changes_no_other_score(runs):
     assert rows["ideal", "identity"].metrics["psnr_db"] > 15  # 6.98 dB when it read zeroed images
 
 
+@pytest.mark.slow
 def test_a_reader_writing_into_what_it_reads_changes_nothing_another_reads(runs):
     sums = [float(line) for line in runs["witness"].read_text().split()]
     # In plan order, each read after zero-reader's: the sharp windows (task `sharp`), then the sensor,
@@ -156,6 +160,7 @@ def test_a_reader_writing_into_what_it_reads_changes_nothing_another_reads(runs)
     assert rows["ideal", "copy-before>witness"].ok and rows["ideal", "copy-before>zero-reader"].ok
 
 
+@pytest.mark.slow
 def test_a_plugin_system_exit_and_a_raising_describe_are_failed_rows(runs):
     rows = rows_of(runs["out2"])
     exit_row, desc = rows["ideal", "exit"], rows["ideal", "desc"]
@@ -170,6 +175,7 @@ def test_a_plugin_system_exit_and_a_raising_describe_are_failed_rows(runs):
     assert {"lens", "utility", "bound", "identity", "copy-after", "identity>witness", "witness"} <= ok
 
 
+@pytest.mark.slow
 def test_every_task_picture_is_sealed_and_the_run_copies_match(runs):
     pictures = [p for p in (runs["cache"] / "tasks").rglob("*.png") if ".staging-" not in str(p.parent)]
     assert pictures
@@ -235,6 +241,7 @@ def test_each_attacker_gets_its_own_lens_and_adversary():
 
 # ---- a lens that fails; pictures -----------------------------------------------------------------
 
+@pytest.mark.slow
 def test_a_spec_the_sensor_cannot_represent_is_named_before_any_compute(tmp_path):
     spec = tmp_path / "bits.toml"
     spec.write_text('name = "bits"\n[mask]\nzernike_um = [0, 0, 0, 0.2, 0, 0]\n[sensor]\nadc_bits = 1000\n')
