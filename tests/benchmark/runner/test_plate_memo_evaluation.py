@@ -5,6 +5,7 @@ recognises fewer crops (the `raw` chain re-reads the sensor chain's crops) and s
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 import attacks
@@ -64,6 +65,7 @@ def _attack(cfg: RunConfig, scenes, sensor: torch.Tensor, same_segmenter: bool):
     return rows, out.plates, reads, seg_sensor.images_seen + (0 if same_segmenter else seg_restored.images_seen), hits
 
 
+@pytest.mark.slow
 def test_remembered_reads_score_every_chain_as_computing_them_again(monkeypatch):
     cfg = RunConfig(["fake"], None, "synthetic", get_profile("smoke"), [0])
     scenes = load_scenes("synthetic", "val", 2, (512, 1024), 0)
