@@ -15,12 +15,10 @@ import re
 from collections.abc import Sequence
 from typing import Any
 
+from benchmark.results.ensemble import WIDTH_VALUE
 from benchmark.results.plate_scoring import READABLE_MIN_WIDTH_PX
 from benchmark.results.schema import Row
 
-# A plate row's per-plate widths; rows without them hold only the plates they pooled (entries of runs
-# that scored plates from 32 px).
-WIDTH_VALUE = "width_px"
 # The scene sets name their scenes <scenes>/<split>/<seed>/<index> (benchmark.scenes.loading).
 SCENE_NAME = re.compile(r"^[^/]+/[^/]+/(\d+)/")
 # How far a row's PSNR may sit from the mean of its per-scene values, which are stored rounded.
