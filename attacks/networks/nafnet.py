@@ -109,6 +109,9 @@ class NAFNet(nn.Module):
         enc_blk_nums: NAFBlocks per encoder level (one 2x2 stride-2 down conv after each).
         dec_blk_nums: NAFBlocks per decoder level (one 1x1 conv + PixelShuffle(2) up before
             each); must have the same length as ``enc_blk_nums``.
+        guide_channels: Extra input channels after the image's (e.g. a second estimate of the same
+            scene): the input is (B, img_channel + guide_channels, H, W), the output stays
+            (B, img_channel, H, W), the image channels plus the residual. 0 is the plain NAFNet.
     """
 
     def __init__(
@@ -118,6 +121,7 @@ class NAFNet(nn.Module):
         middle_blk_num: int = 1,
         enc_blk_nums: Sequence[int] = (1, 1, 1, 28),
         dec_blk_nums: Sequence[int] = (1, 1, 1, 1),
+        guide_channels: int = 0,
     ) -> None:
         super().__init__()
         if len(enc_blk_nums) != len(dec_blk_nums):
@@ -125,7 +129,8 @@ class NAFNet(nn.Module):
                 f"enc_blk_nums {tuple(enc_blk_nums)} and dec_blk_nums {tuple(dec_blk_nums)} "
                 "must have the same length (one decoder level per encoder level)"
             )
-        self.intro = nn.Conv2d(img_channel, width, kernel_size=3, padding=1)
+        self.img_channel = img_channel
+        self.intro = nn.Conv2d(img_channel + guide_channels, width, kernel_size=3, padding=1)
         self.ending = nn.Conv2d(width, img_channel, kernel_size=3, padding=1)
         self.encoders = nn.ModuleList()
         self.downs = nn.ModuleList()
@@ -160,7 +165,7 @@ class NAFNet(nn.Module):
         x = self.middle_blks(x)
         for decoder, up, skip in zip(self.decoders, self.ups, reversed(skips)):
             x = decoder(up(x) + skip)
-        x = self.ending(x) + inp
+        x = self.ending(x) + inp[:, : self.img_channel]
         return x[:, :, :h, :w]
 
 

@@ -1,6 +1,7 @@
 """Ship a lens-independent trained attacker's weights in the package: ``python -m benchmark pretrain-attacker``.
 
-Two qualify: ``learned-reader``'s pre-training on sharp plates (``ship_reader``; every lens's fit
+Three qualify: ``nafnet-known-psf``'s pre-training across the lens family (``ship_known_psf``),
+``learned-reader``'s pre-training on sharp plates (``ship_reader``; every lens's fit
 starts from it) and ``nafnet-generic`` (its training knows no lens, see ``attacks.restorers.nafnet_generic``). The
 command fits it exactly as a run does (the profile's budget, the TRAIN crops of the seed; loaded from
 the cache when a run already trained it), then writes ``attacks/weights/nafnet-generic-<profile>-s<seed>
@@ -26,7 +27,9 @@ from attacks.restorers.gray_world import gray_world_balance
 from attacks.readers.learned_reader import LearnedReader, pack_weights, pretrain, pretrained_key
 from common.plate_render import PLATE_FORMAT
 from attacks.restorers.nafnet_generic import NafnetGeneric
-from attacks.training.restorer_training import collect_pairs
+from attacks.restorers.nafnet_known_psf import PRETRAIN_SEED, SHIPPED_SCENES, NafnetKnownPSF, pack, shipped_key
+from attacks.training.psf_restorer_training import PSF_BUDGETS, pretrain
+from attacks.training.restorer_training import collect_pairs, data_identity
 from attacks.training.shipped_weights import write_shipped
 from benchmark.store.cache import cache_root
 from benchmark.results.metrics import psnr
@@ -34,6 +37,8 @@ from benchmark.store.profiles import Profile, get_profile
 from benchmark.store.provenance import git_commit, package_versions
 from benchmark.runner.config import RunConfig
 from benchmark.runner.tasks import fit_context
+from benchmark.runner.sensing import to_tensor
+from benchmark.scenes.loading import load_scenes
 
 __all__ = ["CHECK_CROPS", "CHECK_SEED", "check_scores", "generic_context", "main"]
 
@@ -77,10 +82,35 @@ def ship_reader(args: argparse.Namespace) -> int:
     return 0
 
 
+def ship_known_psf(args: argparse.Namespace) -> int:
+    """Pre-train ``nafnet-known-psf`` across the lens family on the scenes ``SHIPPED_SCENES`` names and ship
+    it with its held-out curve. Resumable: the checkpoint after every evaluation is in the cache
+    (``<cache>/pretrain/nafnet-known-psf-s0.pt``); running the command again continues from it."""
+    s = SHIPPED_SCENES
+    size = (int(s["size"][0]), int(s["size"][1]))
+    train = to_tensor(load_scenes(s["scenes"], s["train_split"], s["n_train"], size, s["scene_seed"]))
+    heldout = to_tensor(load_scenes(s["scenes"], s["heldout_split"], s["n_heldout"], size, s["scene_seed"]))
+    budget = PSF_BUDGETS["full"]
+    checkpoint = cache_root() / "pretrain" / f"nafnet-known-psf-s{PRETRAIN_SEED}.pt"
+    net, curve = pretrain(budget, train, heldout, PRETRAIN_SEED, checkpoint=checkpoint, progress=print)
+    made = {"commit": git_commit(), "command": "python -m benchmark pretrain-attacker nafnet-known-psf",
+            "seed": PRETRAIN_SEED, "fit_s": round(curve.seconds, 1), "threads": torch.get_num_threads(),
+            "packages": package_versions(), "curve": curve.to_dict(),
+            "training_data": data_identity(train), "heldout_data": data_identity(heldout)}
+    path = write_shipped(f"nafnet-known-psf-full-s{PRETRAIN_SEED}", NafnetKnownPSF.name, shipped_key(budget),
+                         pack(net, curve), made, args.out)
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB) and its provenance; held-out PSNR "
+          f"{max(curve.heldout_psnr_db):.2f} dB (Wiener alone {curve.wiener_psnr_db:.2f} dB) at step "
+          f"{curve.kept_step} of {curve.steps[-1]} ({curve.stopped}{', still rising' if curve.still_rising else ''})")
+    return 0
+
+
 def main(args: argparse.Namespace) -> int:
     """`python -m benchmark pretrain-attacker` (arguments from `benchmark.cli`): fit or load, then ship."""
     if args.attacker == "learned-reader":
         return ship_reader(args)
+    if args.attacker == "nafnet-known-psf":
+        return ship_known_psf(args)
     profile = get_profile(args.profile)
     commit = git_commit()
     ctx = generic_context(profile, args.seed, cache_root())

@@ -1,0 +1,176 @@
+"""``nafnet-known-psf``: a restorer that learned the whole lens family once and is told the lens's PSF.
+
+Lens-access threat model (as ``wiener-known-psf``): the attacker measured the camera's PSF and gain.
+It Wiener-deconvolves the sensor image with them and hands the estimate, beside the white-balanced
+sensor image, to a NAFNet pre-trained once across the family of the registry's lenses
+(``attacks.training.psf_restorer_training``, ``attacks.training.lens_family``), which returns the
+estimate plus a learned correction. Nothing is trained per lens.
+
+Weights: the package ships the pre-training of the full budget (quick and paper profiles; made by
+``python -m benchmark pretrain-attacker nafnet-known-psf``, provenance and held-out curve beside the
+file in ``attacks/weights/``), found by its key (budget, family, training scenes, seed). Where they
+are missing (tiny and smoke runs, whose small budget is never shipped, or a deleted file) it
+pre-trains on the run's own TRAIN pairs' sharp images, the last quarter of them held out, and caches
+the result under a key naming those images.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import struct
+from typing import Any, ClassVar
+
+import torch
+from safetensors import SafetensorError
+from safetensors.torch import load as load_safetensors
+from safetensors.torch import save as save_safetensors
+from torch import Tensor
+
+from attacks.backends.real_fft import OtfCache
+from attacks.base import FitContext, FitReport, Restorer, ThreatModel
+from attacks.networks.nafnet import NAFNet
+from attacks.training.lens_family import LensFamily
+from attacks.training.psf_restorer_training import (
+    PretrainCurve,
+    PsfPretrainBudget,
+    build_network,
+    pretrain,
+    psf_budget,
+    psf_inputs,
+)
+from attacks.training.restorer_training import collect_pairs, data_identity
+from attacks.training.shipped_weights import Shipped, find_shipped
+
+__all__ = ["SHIPPED_SCENES", "NafnetKnownPSF", "pack", "shipped_key", "unpack"]
+
+log = logging.getLogger(__name__)
+
+SHIPPED_SCENES = {"scenes": "synthetic", "train_split": "train", "n_train": 64, "heldout_split": "test",
+                  "n_heldout": 2, "size": [512, 1024], "scene_seed": 0}
+"""The scenes the shipped pre-training saw (loaded by ``benchmark.publish.ship_attacker``)."""
+
+PRETRAIN_SEED = 0
+"""One pre-trained attacker serves every run seed, as one set of GoPro weights would."""
+
+
+def shipped_key(budget: PsfPretrainBudget, data: Any = None) -> dict[str, Any]:
+    """The key the pre-training is cached and shipped under: budget, family, training scenes, seed."""
+    return {"attack": NafnetKnownPSF.name, "budget": budget.to_dict(), "family": LensFamily().describe(),
+            "data": SHIPPED_SCENES if data is None else data, "seed": PRETRAIN_SEED}
+
+
+def pack(net: NAFNet, curve: PretrainCurve) -> bytes:
+    """Safetensors bytes of the network, its curve in the metadata."""
+    state = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
+    return save_safetensors(state, metadata={"kind": NafnetKnownPSF.name, "curve": json.dumps(curve.to_dict())})
+
+
+def unpack(data: bytes, budget: PsfPretrainBudget) -> tuple[NAFNet, PretrainCurve | None]:
+    """The network (and curve, when stored) of ``pack``'s bytes; raises on bytes of another layout."""
+    net = build_network(budget, PRETRAIN_SEED)
+    net.load_state_dict(load_safetensors(data), strict=True)
+    metadata = _metadata(data)
+    curve = PretrainCurve.from_dict(json.loads(metadata["curve"])) if "curve" in metadata else None
+    return net.eval(), curve
+
+
+def _metadata(data: bytes) -> dict[str, str]:
+    """The ``__metadata__`` of safetensors bytes (its header: an 8-byte length, then JSON)."""
+    n = struct.unpack("<Q", data[:8])[0]
+    return json.loads(data[8:8 + n]).get("__metadata__", {})
+
+
+class NafnetKnownPSF(Restorer):
+    """Wiener with the measured PSF, refined by a NAFNet pre-trained across the lens family.
+
+    Args:
+        use_shipped: Load the package's pre-training when its key matches (default); False pre-trains
+            (or loads from the run's cache).
+
+    Attributes:
+        shipped: After ``fit``: the shipped weights used, or None.
+        curve: After ``fit``: the pre-training's held-out curve (None for weights cached without one).
+        trained: After ``fit``: True if it pre-trained in this fit.
+    """
+
+    name: ClassVar[str] = "nafnet-known-psf"
+    threat_model: ClassVar[ThreatModel] = ThreatModel.LENS_ACCESS
+    requires: ClassVar[frozenset[str]] = frozenset({"lens"})
+
+    def __init__(self, use_shipped: bool = True) -> None:
+        self.use_shipped = use_shipped
+        self.shipped: Shipped | None = None
+        self.curve: PretrainCurve | None = None
+        self.trained: bool | None = None
+        self.network: NAFNet | None = None
+        self.budget: PsfPretrainBudget | None = None
+        self._otf: OtfCache | None = None
+        self._gain: Tensor | None = None
+
+    def fit(self, ctx: FitContext) -> FitReport:
+        """Measure the lens (PSF, gain) and load the pre-trained network (or pre-train it, module docs)."""
+        assert ctx.lens is not None  # checked by `requires`
+        self._otf = OtfCache(ctx.lens.psf().detach().cpu())
+        self._gain = ctx.lens.gain().detach().cpu()
+        self.budget = budget = psf_budget(ctx.budget.profile)
+        self.network, self.curve, self.trained = self._load_or_pretrain(ctx, budget)
+        self.network = self.network.to(ctx.device).eval()
+        if self.curve is None:
+            return FitReport()
+        return FitReport(curve=self.curve.to_fit_curve(), still_rising=self.curve.still_rising,
+                         stage_seconds={"pretrain": self.curve.seconds} if self.trained else {})
+
+    def _load_or_pretrain(self, ctx: FitContext, budget: PsfPretrainBudget
+                          ) -> tuple[NAFNet, PretrainCurve | None, bool]:
+        key = shipped_key(budget)
+        if self.use_shipped:
+            self.shipped = find_shipped(self.name, key)
+            if self.shipped is not None:
+                log.info("%s: pre-trained weights shipped with the package (%s)", self.name, self.shipped.path.name)
+                net, curve = unpack(self.shipped.data, budget)
+                return net, curve, False
+        if ctx.train_pairs is None:
+            raise ValueError(f"{self.name}: no shipped pre-training for this budget and no TRAIN pairs to "
+                             "pre-train on (FitContext.train_pairs)")
+        _, sharp = collect_pairs(ctx.train_pairs, 64)
+        if sharp.shape[0] < 2:
+            raise ValueError(f"{self.name}: pre-training needs at least 2 TRAIN scenes (one held out), got {sharp.shape[0]}")
+        key = shipped_key(budget, data_identity(sharp))
+        stored = None if ctx.artifacts is None else ctx.artifacts.load(self.name, key)
+        if stored is not None:
+            try:
+                net, curve = unpack(stored, budget)
+                return net, curve, False
+            except (SafetensorError, RuntimeError, KeyError, ValueError) as exc:
+                log.warning("%s: cached weights unreadable (%s); pre-training again", self.name, exc)
+        log.warning("%s: no shipped pre-training for the %s budget; pre-training on this run's %d TRAIN scenes",
+                    self.name, "small" if budget.max_steps < 100 else "full", sharp.shape[0])
+        held = max(1, sharp.shape[0] // 4)
+        net, curve = pretrain(budget, sharp[:-held], sharp[-held:], PRETRAIN_SEED)
+        if ctx.artifacts is not None:
+            ctx.artifacts.save(self.name, key, pack(net, curve))
+        return net, curve, True
+
+    def restore(self, sensor: Tensor) -> Tensor:
+        """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""
+        if self.network is None or self._otf is None or self._gain is None:
+            raise RuntimeError(f"{self.name}: call fit(ctx) before restore()")
+        device = next(self.network.parameters()).device
+        out = []
+        with torch.no_grad():
+            for i in range(sensor.shape[0]):
+                x = psf_inputs(sensor[i:i + 1].cpu(), self._otf, self._gain)
+                out.append(self.network(x.to(device)).clamp(0.0, 1.0).to(sensor.device))
+        return torch.cat(out)
+
+    def describe(self) -> dict[str, Any]:
+        """Configuration: budget, the pre-training's provenance and held-out score."""
+        described = {**super().describe(), "budget": None if self.budget is None else self.budget.to_dict(),
+                     "input": "wiener(psf, gain, bayer noise) + white-balanced sensor", "per_lens_training": False}
+        if self.shipped is not None:
+            described["shipped_weights"] = self.shipped.describe()
+        if self.curve is not None and self.curve.heldout_psnr_db:
+            described["pretrain_heldout_psnr_db"] = max(self.curve.heldout_psnr_db)
+            described["pretrain_wiener_psnr_db"] = self.curve.wiener_psnr_db
+        return described

@@ -1,0 +1,313 @@
+"""Pre-training of ``nafnet-known-psf`` across the lens family, once, until its held-out PSNR flattens.
+
+What the network sees (``psf_inputs``): the sensor image Wiener-deconvolved with the lens's
+measured PSF, gain and the noise measured on the image (``attacks.restorers.wiener_known_psf``),
+beside the white-balanced sensor image itself; it outputs the Wiener estimate plus a residual. The
+PSF thus enters as the physics says it acts, through the one linear inverse that knows it, and the
+network learns what Wiener cannot: the noise it amplifies, the frequencies the lens erased, the
+ringing at the OTF's zeros.
+
+Training data. Scenes: sharp TRAIN images handed in by the caller (the shipped fit: synthetic TRAIN
+scenes, ``benchmark.publish.ship_attacker``; a run without shipped weights: its own TRAIN scenes), never
+the benchmark's val scenes. Lenses: drawn from ``LensFamily``. A pool of
+``pool_lenses`` lenses, each with ``images_per_lens`` whole scenes sensed and deconvolved at full size
+(so the network trains on exactly what it meets in a run, borders included), is refreshed one lens
+every ``refresh_every`` steps; a step takes ``batch_size`` random crops of ``crop_px`` from the pool.
+Every draw (lens, scenes, sensor noise, crops) is a function of (seed, refresh or step index), so a
+run resumed from its checkpoint continues exactly.
+
+Held out: ``heldout_lenses`` lenses drawn from the same family with another seed stream (lenses not
+drawn in training), each on held-out scenes handed in by the caller (not among the training scenes); the score is the mean PSNR on the
+central half of those images (sensed and deconvolved whole). Evaluated every ``eval_every`` steps;
+the fit stops "flattened" when the best score of the last ``patience_evals`` evaluations is less than
+``min_gain_db`` above the best before them, else at ``max_steps`` ("budget"; ``still_rising`` when the
+last window still gained). The weights of the best evaluation are kept.
+
+Recipe: NAFNet's (``attacks.training.restorer_training``): negative PSNR, AdamW (lr 1e-3, betas 0.9,
+0.9, weight decay 1e-3), cosine schedule over ``max_steps``, gradients clipped to norm 1.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+from tqdm.auto import tqdm
+
+from attacks.backends.real_fft import OtfCache
+from attacks.base import FitCurve
+from attacks.networks.nafnet import NAFNet
+from attacks.restorers.wiener_known_psf import bayer_noise_sigma, wiener_chunks, wiener_deconvolve
+from attacks.training.lens_family import FamilyLens, LensFamily
+from attacks.training.restorer_training import negative_psnr
+
+log = logging.getLogger(__name__)
+
+__all__ = ["PSF_BUDGETS", "PsfPretrainBudget", "PretrainCurve", "build_network", "psf_inputs", "pretrain", "psf_budget"]
+
+HELDOUT_SEED_OFFSET = 1_000_003  # the held-out lenses' stream (seed, this, i); training draws are (seed, index)
+_LR, _LR_MIN, _BETAS, _WEIGHT_DECAY, _GRAD_CLIP = 1e-3, 1e-7, (0.9, 0.9), 1e-3, 1.0
+
+
+@dataclasses.dataclass(frozen=True)
+class PsfPretrainBudget:
+    """Network size and training schedule of the pre-training (module docs name each field)."""
+
+    width: int
+    enc_blocks: tuple[int, ...]
+    middle_blocks: int
+    dec_blocks: tuple[int, ...]
+    max_steps: int
+    batch_size: int
+    crop_px: int
+    pool_lenses: int
+    images_per_lens: int
+    refresh_every: int
+    eval_every: int
+    heldout_lenses: int
+    patience_evals: int
+    min_gain_db: float
+
+    def __post_init__(self) -> None:
+        for name in ("width", "max_steps", "batch_size", "crop_px", "pool_lenses", "images_per_lens",
+                     "refresh_every", "eval_every", "heldout_lenses", "patience_evals"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"PsfPretrainBudget.{name} must be >= 1, got {getattr(self, name)!r}")
+        if self.crop_px % 2:
+            raise ValueError(f"PsfPretrainBudget.crop_px must be even (keeps the Bayer phase), got {self.crop_px}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+PSF_BUDGETS: dict[str, PsfPretrainBudget] = {
+    # The shipped pre-training (quick and paper profiles share it: a convolutional network is
+    # size-agnostic and the PSFs are in sensor pixels either way).
+    "full": PsfPretrainBudget(width=16, enc_blocks=(1, 1, 2), middle_blocks=2, dec_blocks=(1, 1, 1),
+                              max_steps=6000, batch_size=8, crop_px=128, pool_lenses=8, images_per_lens=6,
+                              refresh_every=20, eval_every=250, heldout_lenses=6, patience_evals=4,
+                              min_gain_db=0.05),
+    # Tiny and smoke runs: seconds, so that the tests exercise the whole path.
+    "small": PsfPretrainBudget(width=8, enc_blocks=(1, 1), middle_blocks=1, dec_blocks=(1, 1),
+                               max_steps=12, batch_size=2, crop_px=32, pool_lenses=2, images_per_lens=2,
+                               refresh_every=4, eval_every=4, heldout_lenses=2, patience_evals=2,
+                               min_gain_db=0.05),
+}
+
+
+def psf_budget(profile: str) -> PsfPretrainBudget:
+    """The pre-training budget for a run profile: "small" for tiny and smoke, else "full"."""
+    return PSF_BUDGETS["small" if profile in ("tiny", "smoke") else "full"]
+
+
+def build_network(budget: PsfPretrainBudget, seed: int) -> NAFNet:
+    """The NAFNet of ``budget`` (Wiener estimate + 3 guide channels), initialised from ``seed``; its last
+    convolution starts at zero, so the untrained network returns the Wiener estimate exactly."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        net = NAFNet(width=budget.width, enc_blk_nums=budget.enc_blocks, middle_blk_num=budget.middle_blocks,
+                     dec_blk_nums=budget.dec_blocks, guide_channels=3)
+    with torch.no_grad():
+        net.ending.weight.zero_()
+        assert net.ending.bias is not None
+        net.ending.bias.zero_()
+    return net
+
+
+def psf_inputs(sensor: Tensor, otf: OtfCache, gain: Tensor) -> Tensor:
+    """The network's input (B, 6, H, W): the Wiener estimate and the white-balanced sensor image.
+
+    Args:
+        sensor: Sensor images (B, 3, H, W) in [0, 1] (demosaicked RGGB).
+        otf: The lens's PSF (3, K, K) as an ``OtfCache``.
+        gain: The lens's per-channel gain (3,).
+    """
+    g = gain.to(sensor).view(1, -1, 1, 1)
+    deblurred = torch.cat([wiener_deconvolve(sensor[c], otf, sigma=bayer_noise_sigma(sensor[c]))
+                           for c in wiener_chunks(sensor, otf.psf)])
+    return torch.cat([(deblurred / g).clamp(0.0, 1.0), (sensor / g).clamp(0.0, 1.0)], dim=1)
+
+
+def _generator(*parts: int) -> torch.Generator:
+    """A generator seeded by a hash of ``parts`` (non-negative integers): one stream per (seed, index)."""
+    state = np.random.SeedSequence([int(p) for p in parts]).generate_state(1, np.uint64)[0]
+    return torch.Generator().manual_seed(int(state) >> 1)
+
+
+def _crops(pool: list[tuple[Tensor, Tensor]], n: int, crop_px: int, g: torch.Generator) -> tuple[Tensor, Tensor]:
+    """``n`` random (input, target) crops of ``crop_px`` (even offsets) from random images of the pool."""
+    inputs, targets = [], []
+    for _ in range(n):
+        x, y = pool[int(torch.randint(len(pool), (1,), generator=g))]
+        i = int(torch.randint(x.shape[0], (1,), generator=g))
+        h, w = min(crop_px, x.shape[-2]) // 2 * 2, min(crop_px, x.shape[-1]) // 2 * 2
+        top = int(torch.randint((x.shape[-2] - h) // 2 + 1, (1,), generator=g)) * 2
+        left = int(torch.randint((x.shape[-1] - w) // 2 + 1, (1,), generator=g)) * 2
+        inputs.append(x[i, :, top:top + h, left:left + w])
+        targets.append(y[i, :, top:top + h, left:left + w])
+    return torch.stack(inputs), torch.stack(targets)
+
+
+def _render(family: LensFamily, drawn: FamilyLens, sharp: Tensor, noise_seed: int) -> Tensor:
+    """Network inputs (N, 6, H, W) of the sharp scenes through the drawn lens."""
+    lens = family.build(drawn)
+    with torch.no_grad():
+        sensor = torch.cat([lens(sharp[i:i + 1], generator=torch.Generator().manual_seed(noise_seed + i))
+                            for i in range(sharp.shape[0])])
+        return psf_inputs(sensor, OtfCache(lens.psf().detach()), lens.gain().detach())
+
+
+@dataclasses.dataclass
+class PretrainCurve:
+    """The held-out curve of a pre-training; ``to_fit_curve`` gives the runner's ``FitCurve``."""
+
+    steps: list[int] = dataclasses.field(default_factory=list)
+    heldout_psnr_db: list[float] = dataclasses.field(default_factory=list)
+    wiener_psnr_db: float | None = None  # the same held-out images restored by Wiener alone
+    stopped: str = "budget"
+    still_rising: bool = False
+    seconds: float = 0.0
+    heldout: list[dict[str, Any]] = dataclasses.field(default_factory=list)  # the held-out lenses
+
+    @property
+    def kept_step(self) -> int:
+        return self.steps[max(range(len(self.steps)), key=self.heldout_psnr_db.__getitem__)] if self.steps else 0
+
+    def to_fit_curve(self) -> FitCurve:
+        return FitCurve(tuple(self.steps), tuple(self.heldout_psnr_db), "held-out PSNR (dB), lenses not drawn in training",
+                        self.stopped, self.kept_step)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**dataclasses.asdict(self), "kept_step": self.kept_step}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> PretrainCurve:
+        fields = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in fields})
+
+
+def _psnr(x: Tensor, y: Tensor) -> Tensor:
+    return -10.0 * torch.log10((x.clamp(0, 1) - y).pow(2).flatten(1).mean(1).clamp_min(1e-10))
+
+
+def _centre(x: Tensor) -> Tensor:
+    h, w = x.shape[-2:]
+    return x[..., h // 4: h // 4 + h // 2, w // 4: w // 4 + w // 2]
+
+
+def _flattened(scores: list[float], patience: int, min_gain: float) -> tuple[bool, bool]:
+    """(flattened, still rising) of a held-out curve under the patience rule (module docs)."""
+    if len(scores) <= patience:
+        return False, True
+    gain = max(scores[-patience:]) - max(scores[:-patience])
+    return gain < min_gain, gain >= min_gain
+
+
+def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, seed: int, device: str = "cpu",
+             checkpoint: Path | None = None, family: LensFamily | None = None,
+             progress: Callable[[str], None] | None = None) -> tuple[NAFNet, PretrainCurve]:
+    """Pre-train the known-PSF restorer across the lens family (module docs).
+
+    Args:
+        budget: Size and schedule.
+        scenes: Sharp TRAIN images (N, 3, H, W) in [0, 1], N >= 1.
+        heldout_scenes: Sharp held-out images (M, 3, H, W), none of them in ``scenes``.
+        seed: Seeds the weights and every draw.
+        device: Where the network trains (rendering stays on the CPU).
+        checkpoint: A file to resume from and to write every evaluation to (``torch.save`` of tensors
+            and plain values, read back with ``weights_only=True``); None keeps nothing.
+        family: The lens family (default ``LensFamily()``).
+        progress: Called with one line per evaluation (besides the log).
+
+    Returns:
+        The network with the kept (best held-out) weights, on the CPU, in eval mode, and its curve.
+    """
+    if scenes.ndim != 4 or scenes.shape[0] < 1 or heldout_scenes.ndim != 4 or heldout_scenes.shape[0] < 1:
+        raise ValueError(f"pretrain needs (N, 3, H, W) train and held-out scenes, got {tuple(scenes.shape)} "
+                         f"and {tuple(heldout_scenes.shape)}")
+    family = family or LensFamily()
+    model = build_network(budget, seed).to(device)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=_LR, betas=_BETAS, weight_decay=_WEIGHT_DECAY)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=budget.max_steps, eta_min=_LR_MIN)
+    curve, best_state, start = PretrainCurve(), None, 0
+    if checkpoint is not None and checkpoint.exists():
+        saved = torch.load(checkpoint, weights_only=True)
+        model.load_state_dict(saved["model"])
+        optimizer.load_state_dict(saved["optimizer"])
+        schedule.load_state_dict(saved["schedule"])
+        curve, best_state, start = PretrainCurve.from_dict(saved["curve"]), saved["best"], int(saved["step"])
+        log.info("nafnet-known-psf pre-training resumed at step %d from %s", start, checkpoint)
+
+    # Held-out set: fixed lenses of another seed stream, each on every held-out scene.
+    heldout_draws = [family.draw(_generator(seed, HELDOUT_SEED_OFFSET, i)) for i in range(budget.heldout_lenses)]
+    heldout = [(_centre(_render(family, d, heldout_scenes, 10_000 * (i + 1))), _centre(heldout_scenes))
+               for i, d in enumerate(heldout_draws)]
+    curve.heldout = [d.describe() for d in heldout_draws]
+    curve.wiener_psnr_db = float(torch.cat([_psnr(x[:, :3], y) for x, y in heldout]).mean())
+
+    def evaluate() -> float:
+        model.eval()
+        with torch.no_grad():
+            scores = [_psnr(model(x.to(device)).cpu(), y) for x, y in heldout]
+        model.train()
+        return float(torch.cat(scores).mean())
+
+    def refresh(index: int) -> tuple[Tensor, Tensor]:
+        g = _generator(seed, index, 0)
+        drawn = family.draw(g)
+        chosen = torch.randperm(scenes.shape[0], generator=g)[:budget.images_per_lens]
+        return _render(family, drawn, scenes[chosen], 1_000_000 + index * 1000), scenes[chosen]
+
+    # During step s the pool holds the lenses of refreshes [s // refresh_every, + pool_lenses).
+    first = start // budget.refresh_every
+    pool = [refresh(r) for r in range(first, first + budget.pool_lenses)]
+    t0 = time.perf_counter() - curve.seconds
+    model.train()
+    bar = tqdm(range(start, budget.max_steps), desc="nafnet-known-psf pre-training", unit="step",
+               initial=start, total=budget.max_steps, leave=False)
+    for step in bar:
+        if step != start and step % budget.refresh_every == 0:
+            pool = pool[1:] + [refresh(step // budget.refresh_every + budget.pool_lenses - 1)]
+        inp, target = _crops(pool, budget.batch_size, budget.crop_px, _generator(seed, step, 1))
+        loss = negative_psnr(model(inp.to(device)), target.to(device))
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        nn.utils.clip_grad_norm_(model.parameters(), _GRAD_CLIP)
+        optimizer.step()
+        schedule.step()
+        bar.set_postfix(psnr_db=f"{-loss.item():.2f}")
+        if (step + 1) % budget.eval_every == 0 or step + 1 == budget.max_steps:
+            score = evaluate()
+            curve.steps.append(step + 1)
+            curve.heldout_psnr_db.append(score)
+            if score >= max(curve.heldout_psnr_db):
+                best_state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
+            curve.seconds = time.perf_counter() - t0
+            flat, rising = _flattened(curve.heldout_psnr_db, budget.patience_evals, budget.min_gain_db)
+            curve.still_rising = rising
+            line = (f"step {step + 1}/{budget.max_steps}: held-out {score:.2f} dB (Wiener {curve.wiener_psnr_db:.2f} dB), "
+                    f"{curve.seconds:.0f} s")
+            log.info("nafnet-known-psf pre-training %s", line)
+            if progress is not None:
+                progress(line)
+            if checkpoint is not None:
+                checkpoint.parent.mkdir(parents=True, exist_ok=True)
+                tmp = checkpoint.with_suffix(".tmp")
+                torch.save({"model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                            "schedule": schedule.state_dict(), "curve": curve.to_dict(), "best": best_state,
+                            "step": step + 1}, tmp)
+                tmp.replace(checkpoint)
+            if flat:
+                curve.stopped, curve.still_rising = "flattened", False
+                break
+    bar.close()
+    if best_state is not None:
+        model.load_state_dict(best_state)
+    return model.cpu().eval(), curve
