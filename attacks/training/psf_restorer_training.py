@@ -91,7 +91,7 @@ PSF_BUDGETS: dict[str, PsfPretrainBudget] = {
     # The shipped pre-training (quick and paper profiles share it: a convolutional network is
     # size-agnostic and the PSFs are in sensor pixels either way).
     "full": PsfPretrainBudget(width=16, enc_blocks=(1, 1, 2), middle_blocks=2, dec_blocks=(1, 1, 1),
-                              max_steps=6000, batch_size=8, crop_px=128, pool_lenses=8, images_per_lens=6,
+                              max_steps=3000, batch_size=8, crop_px=128, pool_lenses=8, images_per_lens=6,
                               refresh_every=20, eval_every=250, heldout_lenses=6, patience_evals=4,
                               min_gain_db=0.05),
     # Tiny and smoke runs: seconds, so that the tests exercise the whole path.

@@ -52,6 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from benchmark.results.observer.nuisance import NuisancePrior
 from common.plate_render import PLATE_FORMAT, PLATE_SIZE_M, format_alphabets, random_plate_text, render_plate
 from lenses.depth import plate_distance_m
 from lenses.lens import Lens
@@ -107,6 +108,9 @@ class CeilingCurve:
     pair_ceiling (n,), pair_interval (n, 2): c_pair of `pair_positions` read jointly (NaN where not computed);
     n_plates (n,): plate draws used; converged (n,): every interval narrower than interval_width;
     object_distance_m (n,) when each width used the PSF at its own distance, else None.
+    prior: None for the genie (every nuisance known); else the `NuisancePrior` the marginalised ceiling
+    (`marginal.py`) averaged over, width w_k standing for the bin [w_k, width_high_px[k]), and rule_plate
+    (n,), rule_interval (n, 2): its fresh-nuisance rule, a lower end of the ceiling's M -> infinity limit.
     """
 
     lens: str
@@ -128,6 +132,15 @@ class CeilingCurve:
     pair_positions: tuple[int, int] | None = None
     pair_ceiling: np.ndarray | None = None
     pair_interval: np.ndarray | None = None
+    prior: NuisancePrior | None = None
+    width_high_px: np.ndarray | None = None
+    rule_plate: np.ndarray | None = None
+    rule_interval: np.ndarray | None = None
+
+    @property
+    def kind(self) -> str:
+        """"genie" (every nuisance known: the proven bound) or "marginal" (the tighter ceiling)."""
+        return "genie" if self.prior is None else "marginal"
 
     def to_dict(self) -> dict:
         """JSON-ready dict (lists of floats)."""
@@ -136,7 +149,7 @@ class CeilingCurve:
             value = getattr(self, f.name)
             if isinstance(value, np.ndarray):
                 value = np.where(np.isnan(value), None, value).tolist() if value.dtype.kind == "f" else value.tolist()
-            elif isinstance(value, PlateModel):
+            elif isinstance(value, (PlateModel, NuisancePrior)):
                 value = dataclasses.asdict(value)
             out[f.name] = value
         return out
@@ -157,6 +170,9 @@ class CeilingCurve:
             value = d[f.name]
             if f.name == "model":
                 value = PlateModel(**{k: tuple(v) if isinstance(v, list) else v for k, v in value.items()})
+            elif f.name == "prior":
+                value = None if value is None else NuisancePrior(**{k: tuple(v) if isinstance(v, list) else v
+                                                                    for k, v in value.items()})
             elif f.name == "pair_positions":
                 value = None if value is None else tuple(value)
             elif f.name not in scalars and value is not None:
