@@ -91,7 +91,7 @@ PSF_BUDGETS: dict[str, PsfPretrainBudget] = {
     # The shipped pre-training (quick and paper profiles share it: a convolutional network is
     # size-agnostic and the PSFs are in sensor pixels either way).
     "full": PsfPretrainBudget(width=16, enc_blocks=(1, 1, 2), middle_blocks=2, dec_blocks=(1, 1, 1),
-                              max_steps=3000, batch_size=8, crop_px=128, pool_lenses=8, images_per_lens=6,
+                              max_steps=2500, batch_size=8, crop_px=128, pool_lenses=8, images_per_lens=6,
                               refresh_every=20, eval_every=250, heldout_lenses=6, patience_evals=4,
                               min_gain_db=0.05),
     # Tiny and smoke runs: seconds, so that the tests exercise the whole path.
@@ -269,14 +269,16 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
     first = start // budget.refresh_every
     pool = [refresh(r) for r in range(first, first + budget.pool_lenses)]
     t0 = time.perf_counter() - curve.seconds
-    model.train()
+    # Channels-last weights: the convolutions' backward copies no activations between layouts (measured
+    # 2.0 against 3.0 s a step on one core); evaluation and the returned network use the default layout.
+    model.to(memory_format=torch.channels_last).train()
     bar = tqdm(range(start, budget.max_steps), desc="nafnet-known-psf pre-training", unit="step",
                initial=start, total=budget.max_steps, leave=False)
     for step in bar:
         if step != start and step % budget.refresh_every == 0:
             pool = pool[1:] + [refresh(step // budget.refresh_every + budget.pool_lenses - 1)]
         inp, target = _crops(pool, budget.batch_size, budget.crop_px, _generator(seed, step, 1))
-        loss = negative_psnr(model(inp.to(device)), target.to(device))
+        loss = negative_psnr(model(inp.to(device, memory_format=torch.channels_last)), target.to(device))
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         nn.utils.clip_grad_norm_(model.parameters(), _GRAD_CLIP)
@@ -294,9 +296,6 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
             curve.still_rising = rising
             line = (f"step {step + 1}/{budget.max_steps}: held-out {score:.2f} dB (Wiener {curve.wiener_psnr_db:.2f} dB), "
                     f"{curve.seconds:.0f} s")
-            log.info("nafnet-known-psf pre-training %s", line)
-            if progress is not None:
-                progress(line)
             if checkpoint is not None:
                 checkpoint.parent.mkdir(parents=True, exist_ok=True)
                 tmp = checkpoint.with_suffix(".tmp")
@@ -304,10 +303,14 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
                             "schedule": schedule.state_dict(), "curve": curve.to_dict(), "best": best_state,
                             "step": step + 1}, tmp)
                 tmp.replace(checkpoint)
+            log.info("nafnet-known-psf pre-training %s", line)
+            if progress is not None:
+                progress(line)
             if flat:
                 curve.stopped, curve.still_rising = "flattened", False
                 break
     bar.close()
+    model.to(memory_format=torch.contiguous_format)
     if best_state is not None:
         model.load_state_dict(best_state)
     return model.cpu().eval(), curve

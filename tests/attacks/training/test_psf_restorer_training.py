@@ -1,0 +1,86 @@
+"""Pre-training of the known-PSF restorer (attacks/training/psf_restorer_training.py), on the small budget."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+import torch
+
+from attacks.backends.real_fft import OtfCache
+from attacks.training import psf_restorer_training as training
+from attacks.training.lens_family import FamilyLens, LensFamily
+from attacks.training.psf_restorer_training import PSF_BUDGETS, PsfPretrainBudget, build_network, pretrain, psf_inputs
+from benchmark.runner.sensing import to_tensor
+from benchmark.scenes.loading import load_scenes
+
+SMALL = PSF_BUDGETS["small"]
+
+
+@pytest.fixture(scope="module")
+def scenes() -> tuple[torch.Tensor, torch.Tensor]:
+    return (to_tensor(load_scenes("synthetic", "train", 3, (64, 128), 0)),
+            to_tensor(load_scenes("synthetic", "test", 1, (64, 128), 0)))
+
+
+def _state(net: torch.nn.Module) -> dict[str, torch.Tensor]:
+    return {k: v.clone() for k, v in net.state_dict().items()}
+
+
+def test_the_untrained_network_returns_the_wiener_estimate(scenes):
+    family = LensFamily()
+    lens = family.build(FamilyLens("mask", (0.0, 0.5, -0.5, 1.0, -1.0, 1.0), 10.0))
+    with torch.no_grad():
+        sensor = lens(scenes[0][:1], generator=torch.Generator().manual_seed(0))
+        x = psf_inputs(sensor, OtfCache(lens.psf()), lens.gain())
+        out = build_network(SMALL, 0)(x)
+    assert x.shape == (1, 6, 64, 128)
+    assert torch.equal(out, x[:, :3])
+
+
+def test_pretraining_is_deterministic_and_keeps_the_best_evaluation(scenes):
+    train, heldout = scenes
+    a, curve_a = pretrain(SMALL, train, heldout, 0)
+    b, curve_b = pretrain(SMALL, train, heldout, 0)
+    assert all(torch.equal(a.state_dict()[k], v) for k, v in b.state_dict().items())
+    assert curve_a.heldout_psnr_db == curve_b.heldout_psnr_db
+    assert curve_a.steps == list(range(SMALL.eval_every, SMALL.max_steps + 1, SMALL.eval_every))[:len(curve_a.steps)]
+    assert curve_a.kept_step == curve_a.steps[max(range(len(curve_a.steps)), key=curve_a.heldout_psnr_db.__getitem__)]
+    assert curve_a.to_fit_curve().kept_step == curve_a.kept_step
+    c, _ = pretrain(SMALL, train, heldout, 1)
+    assert any(not torch.equal(c.state_dict()[k], v) for k, v in a.state_dict().items())
+
+
+def test_an_interrupted_pretraining_resumes_to_the_same_weights(scenes, tmp_path):
+    train, heldout = scenes
+    budget = dataclasses.replace(SMALL, patience_evals=99)  # no early stop: every evaluation is reached
+    whole, whole_curve = pretrain(budget, train, heldout, 0)
+    checkpoint = tmp_path / "ckpt.pt"
+    seen: list[str] = []
+
+    def interrupt(line: str) -> None:
+        seen.append(line)
+        if len(seen) == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        pretrain(budget, train, heldout, 0, checkpoint=checkpoint, progress=interrupt)
+    assert torch.load(checkpoint, weights_only=True)["step"] == 2 * budget.eval_every
+    resumed, resumed_curve = pretrain(budget, train, heldout, 0, checkpoint=checkpoint)
+    assert resumed_curve.steps == whole_curve.steps
+    assert resumed_curve.heldout_psnr_db == pytest.approx(whole_curve.heldout_psnr_db, abs=1e-5)
+    for k, v in whole.state_dict().items():
+        assert torch.allclose(resumed.state_dict()[k], v, atol=1e-6), k
+
+
+def test_the_patience_rule():
+    assert training._flattened([20.0, 21.0, 21.01, 21.02], 2, 0.05) == (True, False)
+    assert training._flattened([20.0, 21.0, 21.5, 21.9], 2, 0.05) == (False, True)
+    assert training._flattened([20.0, 21.0], 2, 0.05) == (False, True)  # too short to tell: still rising
+
+
+def test_a_bad_budget_names_its_field():
+    with pytest.raises(ValueError, match="crop_px must be even"):
+        dataclasses.replace(SMALL, crop_px=33)
+    with pytest.raises(ValueError, match="PsfPretrainBudget.max_steps"):
+        PsfPretrainBudget(**{**SMALL.to_dict(), "max_steps": 0})
