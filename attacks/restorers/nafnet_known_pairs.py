@@ -1,15 +1,25 @@
-"""``nafnet-known-pairs``: NAFNet trained on (sensor image, sharp scene) pairs of the lens under test.
+"""``nafnet-known-pairs``: a NAFNet fitted to (sensor image, sharp scene) pairs of the lens under test.
 
 The known-pairs adversary (paper Sec. 4.2, "Trained NAFNet"): it has aligned pairs from the
-camera's TRAIN split and trains a dedicated restorer with NAFNet's recipe (negative PSNR,
-AdamW, cosine schedule; ``attacks.training.restorer_training``), sized by the profile
-(``restorer_steps``, ``nafnet_width``, ``nafnet_*_blocks``). The weights are cached per
-(lens spec, budget, training data, seed), so a second run loads them; the package ships them for
-the lens it ships (``benchmark.codesign.shipped``), under the same key.
+camera's TRAIN split. Two starts (``start``):
+
+- "known-psf": it measures the camera's effective PSF and gain from its pairs
+  (``attacks.training.pair_psf``: it is not given them), and fine-tunes the restorer pre-trained
+  across the lens family (``nafnet-known-psf``, fed the Wiener estimate with the measured PSF) on the
+  pairs until the held-out PSNR of the last eighth of them flattens on a log-step axis
+  (``attacks.training.psf_restorer_training.fine_tune``; at most twice the profile's
+  ``restorer_steps``; the pre-trained start is kept when no step beats it).
+- "scratch" (default): a NAFNet of the profile's size (``restorer_steps``, ``nafnet_width``, ``nafnet_*_blocks``)
+  trained from random weights with NAFNet's recipe (``attacks.training.restorer_training``).
+
+The weights are cached per (start, lens spec, budget, training data, seed), so a second run loads them;
+the package ships the scratch fit for the lens it ships (``benchmark.codesign.shipped``), under its key.
 """
 
 from __future__ import annotations
 
+import json
+import logging
 from typing import Any, ClassVar
 
 import torch
@@ -28,36 +38,50 @@ from attacks.training.restorer_training import (
     shipped_or_fit,
 )
 from attacks.training.shipped_weights import Shipped
+from attacks.backends.real_fft import OtfCache
+from attacks.training.pair_psf import estimate_psf
+from attacks.training.psf_restorer_training import PretrainCurve, fine_tune, psf_inputs
+from attacks.training.restorer_training import fingerprint
+from safetensors import SafetensorError
+from safetensors.torch import load as load_safetensors
+from safetensors.torch import save as save_safetensors
 
-__all__ = ["NafnetKnownPairs"]
+__all__ = ["ESTIMATED_PSF_PX", "STARTS", "NafnetKnownPairs", "NafnetKnownPairsTuned"]
+
+log = logging.getLogger(__name__)
+
+STARTS = ("known-psf", "scratch")
+ESTIMATED_PSF_PX = 95
+"""Side of the PSF the known-psf start estimates (the family's largest support is 87 px), at most the scenes' side."""
 
 
 class NafnetKnownPairs(Restorer):
-    """NAFNet trained on the lens's own TRAIN pairs; restores sensor images directly.
+    """A NAFNet fitted to the lens's own TRAIN pairs (module docs); restores sensor images.
 
     Args:
-        backend: Inference backend, "onnx", "auto" (time torch and ONNX Runtime once, keep the
-            faster) or "torch" (``attacks.backends.onnx_runtime``).
-            ONNX Runtime by default (torch where the network is not on the CPU or the export
-            fails): it runs the folded quick NAFNet faster than torch, and "auto"'s one-image probe
-            has picked the slower one (docs/modelling.md, docs/history.md).
-        use_shipped: Load the package's weights shipped for exactly this lens, budget, training pairs
-            and seed (``attacks.training.shipped_weights``; made with the lens by ``python -m benchmark
-            ship-lens``) when they exist; False trains or loads from the cache.
+        start: "known-psf" (fine-tune the family's pre-trained restorer, fed the PSF measured from the
+            pairs) or "scratch" (train the profile's NAFNet from random weights).
+        backend: Inference backend of the scratch network, "onnx", "auto" or "torch"
+            (``attacks.backends.onnx_runtime``; ONNX Runtime runs the folded quick NAFNet faster than torch).
+        use_shipped: Use weights shipped in the package when their key matches (the scratch fit of the
+            shipped lens; the family pre-training the known-psf start begins from); False trains or
+            loads from the cache.
 
     Attributes:
         trained: After ``fit``: True if it trained, False if the weights came from the cache or the package.
         shipped: After ``fit``: the shipped weights used, or None.
-        network: After ``fit``: the trained NAFNet.
-        engine: After ``fit``: the inference engine (``engine.backend`` says which is in use), running
-            ``network`` folded for inference (``attacks.networks.nafnet_folded``).
+        network: After ``fit``: the network.
+        curve: After a known-psf ``fit``: the fine-tune's held-out curve (step 0 is the pre-trained start).
     """
 
     name: ClassVar[str] = "nafnet-known-pairs"
     threat_model: ClassVar[ThreatModel] = ThreatModel.KNOWN_PAIRS
     requires: ClassVar[frozenset[str]] = frozenset({"lens", "train_pairs"})
 
-    def __init__(self, backend: str = "onnx", use_shipped: bool = True) -> None:
+    def __init__(self, start: str = "scratch", backend: str = "onnx", use_shipped: bool = True) -> None:
+        if start not in STARTS:
+            raise ValueError(f"nafnet-known-pairs: start must be one of {', '.join(STARTS)}, got {start!r}")
+        self.start = start
         self.backend = check_backend(backend)
         self.use_shipped = use_shipped
         self.shipped: Shipped | None = None
@@ -65,12 +89,18 @@ class NafnetKnownPairs(Restorer):
         self.trained: bool | None = None
         self.network: NAFNet | None = None
         self.engine: InferenceEngine | None = None
+        self.curve: PretrainCurve | None = None
+        self._otf: OtfCache | None = None
+        self._gain: Tensor | None = None
 
     def fit(self, ctx: FitContext) -> FitReport:
-        """Train (or load from ``ctx.artifacts``) a NAFNet on ``ctx.train_pairs``."""
+        """Fine-tune (known-psf) or train (scratch) on ``ctx.train_pairs``, or load from ``ctx.artifacts``."""
         assert ctx.lens is not None and ctx.train_pairs is not None  # checked by `requires`
         budget = RestorerBudget.from_budget(ctx.budget)
         sensor, sharp = collect_pairs(ctx.train_pairs, budget.max_train_images)
+        self.budget = budget
+        if self.start == "known-psf":
+            return self._fit_known_psf(ctx, budget, sensor, sharp)
         key = self._key(budget, ctx, sensor, sharp)
 
         def next_batch(generator: torch.Generator) -> tuple[Tensor, Tensor]:
@@ -78,10 +108,48 @@ class NafnetKnownPairs(Restorer):
             return inp, target
 
         model, self.trained, self.shipped = shipped_or_fit(budget, ctx, self.name, key, next_batch, self.use_shipped)
-        self.budget = budget
         self.network = model.to(ctx.device).eval()
         self.engine = InferenceEngine(fold_for_inference(self.network), self.backend, fallback=True)
         return FitReport()
+
+    def _fit_known_psf(self, ctx: FitContext, budget: RestorerBudget, sensor: Tensor, sharp: Tensor) -> FitReport:
+        from attacks.restorers.nafnet_known_psf import NafnetKnownPSF, pack, unpack
+
+        if sensor.shape[0] < 2:
+            raise ValueError(f"{self.name}: the known-psf start needs at least 2 TRAIN pairs (some held out), "
+                             f"got {sensor.shape[0]}")
+        size = min(ESTIMATED_PSF_PX, (min(sensor.shape[-2:]) - 1) // 2 * 2 + 1)
+        psf, gain = estimate_psf(sensor, sharp, size)
+        self._otf, self._gain = OtfCache(psf), gain
+        start = NafnetKnownPSF(use_shipped=self.use_shipped)
+        net, _, _ = start.load_pretrained(ctx)
+        self.shipped = start.shipped
+        key = {**self._key(budget, ctx, sensor, sharp), "start": self.start,
+               "pretrained": fingerprint(*(v for _, v in sorted(net.state_dict().items())))}
+        stored = None if ctx.artifacts is None else ctx.artifacts.load(self.name, key)
+        if stored is not None:
+            try:
+                self.network, self.curve = unpack(stored, start.budget)
+                self.trained = False
+                return self._report()
+            except (SafetensorError, RuntimeError, KeyError, ValueError) as exc:
+                log.warning("%s: cached weights unreadable (%s); fine-tuning again", self.name, exc)
+        inputs = psf_inputs(sensor, self._otf, gain)
+        held = max(1, sensor.shape[0] // 8)
+        h, w = inputs.shape[-2:]
+        centre = (slice(None), slice(None), slice(h // 4, h // 4 + h // 2), slice(w // 4, w // 4 + w // 2))
+        self.curve = fine_tune(net, inputs[:-held], sharp[:-held], inputs[-held:][centre], sharp[-held:][centre],
+                               max_steps=2 * budget.steps, crop_px=budget.crop_px, batch_size=budget.batch_size,
+                               seed=ctx.seed, device=ctx.device)
+        self.network, self.trained = net, True
+        if ctx.artifacts is not None:
+            ctx.artifacts.save(self.name, key, pack(net, self.curve))
+        return self._report()
+
+    def _report(self) -> FitReport:
+        assert self.curve is not None
+        return FitReport(curve=self.curve.to_fit_curve(), still_rising=self.curve.still_rising,
+                         stage_seconds={"fine-tune": self.curve.seconds} if self.trained else {})
 
     def cache_key(self, ctx: FitContext) -> dict[str, Any]:
         """The configuration its weights are cached (and shipped) under: budget, lens, training pairs, seed."""
@@ -97,16 +165,36 @@ class NafnetKnownPairs(Restorer):
 
     def restore(self, sensor: Tensor) -> Tensor:
         """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""
+        if self.start == "known-psf":
+            if self.network is None or self._otf is None or self._gain is None:
+                raise RuntimeError(f"{self.name}: call fit(ctx) before restore()")
+            with torch.no_grad():
+                return torch.cat([self.network(psf_inputs(sensor[i:i + 1].cpu(), self._otf, self._gain)).clamp(0.0, 1.0)
+                                  for i in range(sensor.shape[0])]).to(sensor.device)
         if self.engine is None:
             raise RuntimeError(f"{self.name}: call fit(ctx) before restore()")
         return self.engine(sensor).clamp(0.0, 1.0)
 
     def describe(self) -> dict[str, Any]:
-        """Configuration: backend option, training budget and recipe."""
-        described = {**super().describe(), "backend": self.backend,
-                     "budget": None if self.budget is None else self.budget.to_dict(),
-                     "recipe": "nafnet: -psnr, adamw 1e-3, cosine"}
+        """Configuration: start, backend option, training budget and recipe."""
+        recipe = ("pair-measured psf + wiener, fine-tune of nafnet-known-psf: -psnr, adamw 2e-4, cosine, log-step stop"
+                  if self.start == "known-psf" else "nafnet: -psnr, adamw 1e-3, cosine")
+        described = {**super().describe(), "start": self.start, "backend": self.backend,
+                     "budget": None if self.budget is None else self.budget.to_dict(), "recipe": recipe}
         if self.shipped is not None:
             described["shipped_weights"] = self.shipped.describe()
+        if self.curve is not None and self.curve.heldout_psnr_db:
+            described["fine_tune_heldout_psnr_db"] = {"start": self.curve.heldout_psnr_db[0],
+                                                      "kept": max(self.curve.heldout_psnr_db),
+                                                      "kept_step": self.curve.kept_step}
         return described
 
+
+class NafnetKnownPairsTuned(NafnetKnownPairs):
+    """``nafnet-known-pairs-tuned``: the known-psf start of ``nafnet-known-pairs`` (module docs), its own row:
+    the PSF and gain measured from the pairs, the family's pre-trained restorer fine-tuned on them."""
+
+    name: ClassVar[str] = "nafnet-known-pairs-tuned"
+
+    def __init__(self, backend: str = "onnx", use_shipped: bool = True) -> None:
+        super().__init__(start="known-psf", backend=backend, use_shipped=use_shipped)

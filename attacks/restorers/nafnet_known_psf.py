@@ -113,16 +113,17 @@ class NafnetKnownPSF(Restorer):
         assert ctx.lens is not None  # checked by `requires`
         self._otf = OtfCache(ctx.lens.psf().detach().cpu())
         self._gain = ctx.lens.gain().detach().cpu()
-        self.budget = budget = psf_budget(ctx.budget.profile)
-        self.network, self.curve, self.trained = self._load_or_pretrain(ctx, budget)
+        self.network, self.curve, self.trained = self.load_pretrained(ctx)
         self.network = self.network.to(ctx.device).eval()
         if self.curve is None:
             return FitReport()
         return FitReport(curve=self.curve.to_fit_curve(), still_rising=self.curve.still_rising,
                          stage_seconds={"pretrain": self.curve.seconds} if self.trained else {})
 
-    def _load_or_pretrain(self, ctx: FitContext, budget: PsfPretrainBudget
-                          ) -> tuple[NAFNet, PretrainCurve | None, bool]:
+    def load_pretrained(self, ctx: FitContext) -> tuple[NAFNet, PretrainCurve | None, bool]:
+        """The pre-trained network of the context's budget, its curve, and whether it was pre-trained now:
+        the shipped weights, else the cache's, else a pre-training on ``ctx.train_pairs`` (module docs)."""
+        self.budget = budget = psf_budget(ctx.budget.profile)
         key = shipped_key(budget)
         if self.use_shipped:
             self.shipped = find_shipped(self.name, key)

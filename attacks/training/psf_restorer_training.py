@@ -50,7 +50,8 @@ from attacks.training.restorer_training import negative_psnr
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PSF_BUDGETS", "PsfPretrainBudget", "PretrainCurve", "build_network", "psf_inputs", "pretrain", "psf_budget"]
+__all__ = ["FINE_TUNE_FIRST_EVAL", "FINE_TUNE_LR", "PSF_BUDGETS", "PretrainCurve", "PsfPretrainBudget", "build_network",
+           "fine_tune", "pretrain", "psf_budget", "psf_inputs"]
 
 HELDOUT_SEED_OFFSET = 1_000_003  # the held-out lenses' stream (seed, this, i); training draws are (seed, index)
 _LR, _LR_MIN, _BETAS, _WEIGHT_DECAY, _GRAD_CLIP = 1e-3, 1e-7, (0.9, 0.9), 1e-3, 1.0
@@ -314,3 +315,72 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
     if best_state is not None:
         model.load_state_dict(best_state)
     return model.cpu().eval(), curve
+
+
+FINE_TUNE_LR = 2e-4
+"""Peak learning rate of a fine-tune (a fifth of the pre-training's: the start is already good)."""
+FINE_TUNE_FIRST_EVAL = 25
+"""Steps of a fine-tune's first held-out evaluation after the start; each later one doubles them."""
+
+
+def fine_tune(model: NAFNet, inputs: Tensor, targets: Tensor, heldout_inputs: Tensor, heldout_targets: Tensor,
+              max_steps: int, crop_px: int, batch_size: int, seed: int, min_gain_db: float = 0.05,
+              device: str = "cpu") -> PretrainCurve:
+    """Fine-tune ``model`` in place on one lens's pairs until its held-out PSNR flattens on a log-step axis.
+
+    Evaluated at the start (step 0: the pre-trained network as it is) and after 25, 50, 100, ... steps
+    (at most ``max_steps``, the cosine schedule's length); it stops "flattened" at the first doubling of
+    the steps that gains less than ``min_gain_db``, else "budget" (``still_rising`` when the last
+    doubling still gained). The best evaluation's weights are kept, the start's included: a fine-tune
+    never hands back a network worse on the held-out pairs than the one it started from.
+
+    Args:
+        model: The pre-trained network (input ``psf_inputs``, 6 channels).
+        inputs, targets: Training pairs (N, 6, H, W) and (N, 3, H, W).
+        heldout_inputs, heldout_targets: Held-out pairs of the same lens, not among the training ones.
+    """
+    model.to(device)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=FINE_TUNE_LR, betas=_BETAS, weight_decay=_WEIGHT_DECAY)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=max(max_steps, 1), eta_min=_LR_MIN)
+    curve = PretrainCurve()
+    t0 = time.perf_counter()
+
+    def evaluate(step: int) -> None:
+        model.eval()
+        with torch.no_grad():
+            score = float(torch.cat([_psnr(model(heldout_inputs[i:i + 1].to(device)).cpu(), heldout_targets[i:i + 1])
+                                     for i in range(heldout_inputs.shape[0])]).mean())
+        curve.steps.append(step)
+        curve.heldout_psnr_db.append(score)
+        if score >= max(curve.heldout_psnr_db):
+            nonlocal best
+            best = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
+        model.train()
+
+    best: dict[str, Tensor] = {}
+    evaluate(0)
+    next_eval = min(FINE_TUNE_FIRST_EVAL, max_steps)
+    pool = [(inputs, targets)]
+    model.to(memory_format=torch.channels_last).train()
+    for step in range(max_steps):
+        inp, target = _crops(pool, batch_size, crop_px, _generator(seed, step, 2))
+        loss = negative_psnr(model(inp.to(device, memory_format=torch.channels_last)), target.to(device))
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        nn.utils.clip_grad_norm_(model.parameters(), _GRAD_CLIP)
+        optimizer.step()
+        schedule.step()
+        if step + 1 == next_eval:
+            evaluate(step + 1)
+            gain = curve.heldout_psnr_db[-1] - curve.heldout_psnr_db[-2]
+            curve.still_rising = gain >= min_gain_db
+            log.info("fine-tune step %d/%d: held-out %.2f dB (%+.2f dB)", step + 1, max_steps, curve.heldout_psnr_db[-1], gain)
+            if not curve.still_rising:
+                curve.stopped = "flattened"
+                break
+            next_eval = min(2 * next_eval, max_steps)
+    curve.seconds = time.perf_counter() - t0
+    model.to(memory_format=torch.contiguous_format)
+    model.load_state_dict(best)
+    model.cpu().eval()
+    return curve

@@ -3,16 +3,21 @@ say when a lens's privacy figure should not be trusted, in the spirit of AutoAtt
 
 Gap. Per lens and plate-width bin: the T = 1 plate ceiling (``leaderboard/studies/ideal_observer.json``,
 only where the study used the lens's own spec: ``benchmark.results.observer.published.study_record``)
-at the bin's lower edge minus the ensemble's accuracy in the bin (``benchmark.results.ensemble``). The
-ceiling rises with width, so its value at the lower edge is the least over the bin and the gap is a
-lower bound on the bin's mean gap. Plate units without recorded widths give one bin, every readable
+minus the ensemble's accuracy in the bin (``benchmark.results.ensemble``). The ceiling is the tighter,
+marginalised one (``observer.marginal``: the ideal observer not told the plate's position, scale and
+exposure) where the study holds it, its value for the bin that starts at the bin's lower edge (the
+bin's average over the width prior); else the genie's at the bin's lower edge (it rises with width,
+so that is the least over the bin and the gap a lower bound on the bin's mean gap). ``Gap.ceiling_kind``
+says which. Plate units without recorded widths give one bin, every readable
 plate (>= LEGACY_READABLE_MIN_WIDTH_PX): the gap "at 32 px". Its 95 % interval combines the ceiling's
 Monte-Carlo interval and the ensemble's Wilson interval (low = ceiling low - ensemble high).
 
 Flags (``Flag.kind``):
 
-- ``above-ceiling``: a reader or chain reads more than the ceiling allows (its Wilson interval above
-  the ceiling's upper limit, ``observer.consistency``): a modelling or scoring error.
+- ``above-ceiling``: a reader or chain reads more than the genie's ceiling allows (its Wilson interval
+  above the ceiling's upper limit, ``observer.consistency``): a modelling or scoring error.
+- ``above-tighter-ceiling``: above the marginalised ceiling but not the genie's: the reader knows what
+  the nuisance prior says no attacker knows, or the scenes' nuisances are narrower than the prior.
 - ``fit-still-rising``: a learned attacker's row carries the note ``fit_still_rising`` = "true"
   (``schema.FIT_STILL_RISING``): its fit stopped while held-out accuracy was still improving, so it
   is a lower bound on what that attacker reaches.
@@ -20,8 +25,9 @@ Flags (``Flag.kind``):
   beats, by a paired test at the 5 % level, one of its family that does (same name before the first
   "-", e.g. nafnet-generic and nafnet-known-pairs; a chain's family is its restorer's with the same
   reader): the trained one is under-fitted.
-- ``attack-gap``: a gap over ``GAP_ALARM`` (30 points) in a bin where the ceiling exceeds
-  ``CEILING_ALARM`` (50 %): the suite's attackers are weak here, privacy is overstated.
+- ``attack-gap``: a gap over ``GAP_ALARM`` (30 points) in a bin where the ceiling (the tighter one where
+  the study holds it) exceeds ``CEILING_ALARM`` (50 %): the suite's attackers are weak here, privacy is
+  overstated.
 """
 
 from __future__ import annotations
@@ -38,17 +44,17 @@ from benchmark.results.ensemble import Accuracy, PlateEnsemble, plate_ensemble, 
 from benchmark.results.entries import Entry
 from benchmark.results.observer.ceiling import CeilingCurve
 from benchmark.results.observer.consistency import BinAccuracy, check_consistency
-from benchmark.results.observer.published import study_record, t1_curve
+from benchmark.results.observer.published import marginal_t1_curve, study_record, t1_curve
 from benchmark.results.schema import FIT_STILL_RISING, Row, threat_models
 
 __all__ = ["CEILING_ALARM", "FLAG_KINDS", "GAP_ALARM", "GAP_WIDTHS_PX", "Flag", "Gap", "attack_gaps", "entry_flags",
-           "entry_gaps", "lens_flags"]
+           "entry_gaps", "gap_curve", "lens_flags"]
 
 GAP_ALARM = 0.30
 CEILING_ALARM = 0.50
 # Widths whose gap the leaderboard shows (a bin starting there, where the entry has one).
 GAP_WIDTHS_PX = (16, 32, 64)
-FLAG_KINDS = ("above-ceiling", "fit-still-rising", "untrained-beats-trained", "attack-gap")
+FLAG_KINDS = ("above-ceiling", "above-tighter-ceiling", "fit-still-rising", "untrained-beats-trained", "attack-gap")
 UNTRAINED = "sensor-access"
 _TRUE, _FALSE = ("true", "1", "yes"), ("false", "0", "no")
 
@@ -57,7 +63,8 @@ _TRUE, _FALSE = ("true", "1", "yes"), ("false", "0", "no")
 class Gap:
     """Ceiling minus ensemble accuracy on plates of width [low_px, high_px) (see the module docstring).
 
-    pooled: True when the plates carry no widths and the bin is every readable plate.
+    pooled: True when the plates carry no widths and the bin is every readable plate; ceiling_kind:
+    "marginal" (the tighter ceiling) or "genie".
     """
 
     low_px: float
@@ -66,6 +73,7 @@ class Gap:
     ceiling_interval: tuple[float, float]
     ensemble: Accuracy
     pooled: bool
+    ceiling_kind: str = "genie"
 
     @property
     def gap(self) -> float:
@@ -104,9 +112,17 @@ class Flag:
 
 
 def _ceiling_at(curve: CeilingCurve, width_px: float) -> tuple[float, tuple[float, float]] | None:
-    """The T = 1 plate ceiling and its 95 % interval at `width_px` (linear between tabulated widths);
-    None outside the tabulated widths."""
+    """The T = 1 plate ceiling and its 95 % interval at `width_px` (linear between tabulated widths; a
+    marginalised curve: the value of the bin [w_k, high_k) holding `width_px`); None outside the tabulated
+    widths (or bins)."""
     widths = curve.widths_px.astype(float)
+    if curve.width_high_px is not None:
+        inside = np.flatnonzero((widths <= width_px) & (width_px < curve.width_high_px))
+        if not len(inside):
+            return None
+        k = int(inside[-1])
+        value = float(curve.plate_ceiling[k])
+        return value, (min(float(curve.plate_interval[k, 0]), value), max(float(curve.plate_interval[k, 1]), value))
     if not widths[0] <= width_px <= widths[-1]:
         return None
     value = float(np.interp(width_px, widths, curve.plate_ceiling))
@@ -127,17 +143,25 @@ def attack_gaps(ensemble: PlateEnsemble, curve: CeilingCurve) -> list[Gap]:
     for low, high, accuracy, pooled in bins:
         found = _ceiling_at(curve, low)
         if found is not None and accuracy.n:
-            out.append(Gap(low, high, found[0], found[1], accuracy, pooled))
+            out.append(Gap(low, high, found[0], found[1], accuracy, pooled, curve.kind))
     return out
 
 
 def _curve(study: Mapping[str, Any] | None, lens: str, spec: Mapping[str, Any] | None) -> CeilingCurve | None:
+    """The genie's T = 1 curve of the lens (None: the study does not cover its spec)."""
     return t1_curve(study_record(study, lens, spec))
+
+
+def gap_curve(study: Mapping[str, Any] | None, lens: str, spec: Mapping[str, Any] | None) -> CeilingCurve | None:
+    """The curve the gap is taken against: the tighter (marginalised) T = 1 curve where the study's record
+    of the lens holds one, else the genie's; None where the study does not cover the lens's spec."""
+    record = study_record(study, lens, spec)
+    return marginal_t1_curve(record) or t1_curve(record)
 
 
 def entry_gaps(entry: Entry, study: Mapping[str, Any] | None, attacks: set[str] | None = None) -> list[Gap]:
     """The entry's gaps (none where the study does not cover its lens spec or no chain has plate units)."""
-    curve = _curve(study, entry.lens, entry.lens_spec)
+    curve = gap_curve(study, entry.lens, entry.lens_spec)
     ensemble = None if curve is None else plate_ensemble(entry.rows, attacks)
     return [] if curve is None or ensemble is None else attack_gaps(ensemble, curve)
 
@@ -241,10 +265,16 @@ def lens_flags(lens: str, profile: str, rows: Iterable[Row], spec: Mapping[str, 
     spec the study must match for the ceiling flags."""
     rows = [r for r in rows if r.lens == lens]
     curve = _curve(study, lens, spec)
+    tighter = marginal_t1_curve(study_record(study, lens, spec))
     flags = []
     if curve is not None:
-        for v in check_consistency(_row_accuracies(lens, rows), {lens: curve}):
-            flags.append(Flag(lens, profile, "above-ceiling", v.message()))
+        accuracies = _row_accuracies(lens, rows)
+        above = check_consistency(accuracies, {lens: curve})
+        flags += [Flag(lens, profile, "above-ceiling", v.message()) for v in above]
+        crossed = {v.measured.reader for v in above}
+        if tighter is not None:
+            flags += [Flag(lens, profile, "above-tighter-ceiling", v.message())
+                      for v in check_consistency(accuracies, {lens: tighter}) if v.measured.reader not in crossed]
     rising: dict[str, list[int]] = {}
     for row in rows:
         if row.ok and _rising(row):
@@ -254,12 +284,14 @@ def lens_flags(lens: str, profile: str, rows: Iterable[Row], spec: Mapping[str, 
                           f"{attack}'s fit was still improving when it stopped (seed{'s' if len(seeds) > 1 else ''} "
                           f"{','.join(map(str, sorted(seeds)))}): its figures are a lower bound on that attacker"))
     flags += [Flag(lens, profile, "untrained-beats-trained", m) for m in _stronger_untrained(rows)]
-    ensemble = None if curve is None else plate_ensemble(rows)
-    for gap in [] if ensemble is None or curve is None else attack_gaps(ensemble, curve):
+    against = tighter or curve
+    ensemble = None if against is None else plate_ensemble(rows)
+    for gap in [] if ensemble is None or against is None else attack_gaps(ensemble, against):
         if gap.ceiling > CEILING_ALARM and gap.gap > GAP_ALARM:
+            which = "tighter (marginalised) ceiling" if gap.ceiling_kind == "marginal" else "ceiling (genie)"
             flags.append(Flag(lens, profile, "attack-gap",
                               f"the ensemble reads {gap.ensemble.text()} % of plates at {gap.where()} where the ideal "
-                              f"observer's ceiling is {100 * gap.ceiling:.1f} % [{100 * gap.ceiling_interval[0]:.1f}, "
+                              f"observer's {which} is {100 * gap.ceiling:.1f} % [{100 * gap.ceiling_interval[0]:.1f}, "
                               f"{100 * gap.ceiling_interval[1]:.1f}]: a gap of {gap.text()} points: the suite's "
                               "attackers are weak here: privacy is overstated"))
     return flags

@@ -6,6 +6,10 @@ the certified widths W_5%, and the seconds it took. For `DEPTH_LENSES` the same 
 the PSF at each width's own object distance (`lenses.depth.plate_distance_m`), to show whether one
 object plane suffices. Each lens's record keeps the lens spec it was computed for (`lens_spec`), so
 the leaderboard shows a ceiling only beside an entry of that very lens (benchmark.results.observer.published).
+With `--marginal`, each lens's record also holds the tighter ceiling (`record["marginal"]`:
+benchmark.results.observer.marginal, the ideal observer not told the nuisances of a `NuisancePrior`),
+per width bin [w_k, w_{k+1}) of the same grid, with its seconds, load, prior and precision, and its
+convergence against the number of nuisance points at one width bin (`convergence`).
 Writes leaderboard/studies/ideal_observer.json and its chart leaderboard/charts/ideal_observer.png
 (benchmark.results.charts.ideal_observer_chart, re-rendered by `python -m benchmark report` with the readers on it).
 """
@@ -20,6 +24,8 @@ import time
 from pathlib import Path
 
 from benchmark.results.observer.ceiling import CeilingCurve, PlateModel, Precision, ceiling_curves, certified_width
+from benchmark.results.observer.marginal import convergence, marginal_ceiling_curves
+from benchmark.results.observer.nuisance import NuisancePrior
 from lenses import Lens, parse_spec
 
 WIDTHS_PX = (4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 160)
@@ -74,12 +80,33 @@ def _timed_curves(lens: Lens, widths_px: tuple[int, ...], frames: tuple[int, ...
             **{f"t{c.frames}": summary(c) for c in curves}}
 
 
+def _timed_marginal(lens: Lens, widths_px: tuple[int, ...], frames: tuple[int, ...], seed: int, precision: Precision,
+                    prior: NuisancePrior, convergence_width_px: int | None,
+                    convergence_points: tuple[int, ...] = (1, 2, 4, 8, 16, 32)) -> dict:
+    """The tighter ceiling's summaries (t1, ...) per width bin, with its seconds, load before and after,
+    widths, bin ends, prior and precision, and (convergence_width_px given) its convergence at that bin."""
+    load_before, t0 = _load_average(), time.perf_counter()
+    curves = marginal_ceiling_curves(lens, widths_px, frames, prior=prior, seed=seed, precision=precision)
+    out = {"seconds": time.perf_counter() - t0, "load_average": [load_before, _load_average()],
+           "widths_px": list(widths_px), "width_high_px": curves[0].width_high_px.tolist(),
+           "precision": dataclasses.asdict(precision), "prior": dataclasses.asdict(prior),
+           **{f"t{c.frames}": summary(c) for c in curves}}
+    if convergence_width_px is not None:
+        k = list(widths_px).index(convergence_width_px)
+        t1 = time.perf_counter()
+        out["convergence"] = convergence(lens, convergence_width_px, out["width_high_px"][k], convergence_points, prior,
+                                         seed=seed)
+        out["convergence"]["seconds"] = time.perf_counter() - t1
+    return out
+
+
 def run_study(out_json: Path = REPO / "leaderboard" / "studies" / "ideal_observer.json",
               out_png: Path | None = REPO / "leaderboard" / "charts" / "ideal_observer.png",
               names: tuple[str, ...] | None = None, widths_px: tuple[int, ...] = WIDTHS_PX,
               frames: tuple[int, ...] = FRAMES, depth_lenses: tuple[str, ...] = DEPTH_LENSES, seed: int = 0,
               precision: Precision = Precision(max_plates=40), depth_only: bool = False,
-              note: str | None = None) -> dict:
+              note: str | None = None, marginal: NuisancePrior | None = None, marginal_only: bool = False,
+              convergence_width_px: int | None = None) -> dict:
     """Compute the study (module docstring) for `names` (default: all quick lenses) and merge it into
     `out_json`: the lenses computed now replace their old records, every other lens is kept as it was.
 
@@ -88,6 +115,10 @@ def run_study(out_json: Path = REPO / "leaderboard" / "studies" / "ideal_observe
     Each lens records its seconds, the load average before and after, its widths and precision, and
     `note` (e.g. why its grid is reduced). The json is written after every lens (an interrupted run
     keeps what it finished); the chart (`out_png`, None: none) once at the end.
+
+    marginal: also compute the tighter ceiling under this prior (`record["marginal"]`, T = 1 only),
+    with its convergence at `convergence_width_px` when given; marginal_only: only that, for lenses whose
+    flat curve `out_json` already holds for the same spec (as depth_only).
     """
     from benchmark.results.observer.published import same_lens
     specs = quick_lens_specs()
@@ -101,21 +132,28 @@ def run_study(out_json: Path = REPO / "leaderboard" / "studies" / "ideal_observe
                     else {"eps": EPS, "seed": seed, "plate_model": model, "lenses": {}})
     if record.get("eps") != EPS or record.get("seed") != seed or record.get("plate_model") != model:
         raise ValueError(f"{out_json} was computed with another eps, seed or plate model; merge into a new file")
-    if depth_only:
+    if marginal_only and marginal is None:
+        raise ValueError("marginal_only needs a nuisance prior (marginal=NuisancePrior(...))")
+    if depth_only or marginal_only:
         lacking = [n for n in names if n not in record["lenses"] or not same_lens(record["lenses"][n]["lens_spec"],
                                                                                   specs[n])]
         if lacking:
-            raise ValueError(f"depth_only needs the flat curve of {lacking} in {out_json}; compute it first")
+            raise ValueError(f"depth_only and marginal_only need the flat curve of {lacking} in {out_json}; "
+                             "compute it first")
     for name in names:
         lens = lenses_by_name[name]
-        if depth_only:
+        if depth_only or marginal_only:
             entry = record["lenses"][name]
         else:
             # The spec travels with the curve: the leaderboard shows it only for entries of the same lens.
             entry = {"lens_spec": specs[name], **_timed_curves(lens, widths_px, frames, seed, precision, False)}
             if note:
                 entry["note"] = note
-        if name in depth_lenses or depth_only:
+        if marginal is not None:
+            entry["marginal"] = _timed_marginal(lens, widths_px, (1,), seed, precision, marginal, convergence_width_px)
+            if note:
+                entry["marginal"]["note"] = note
+        if (name in depth_lenses and not marginal_only) or depth_only:
             entry["at_own_distance"] = _timed_curves(lens, widths_px, frames, seed, precision, True)
             if note:
                 entry["at_own_distance"]["note"] = note
@@ -163,11 +201,25 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--depth-only", action="store_true", help="only the curve at each width's own distance")
     parser.add_argument("--note", help="stored with each lens computed (e.g. why the grid is reduced)")
     parser.add_argument("--no-chart", action="store_true", help="do not redraw the chart")
+    parser.add_argument("--marginal", action="store_true", help="also the tighter (marginalised) ceiling")
+    parser.add_argument("--marginal-only", action="store_true", help="only the tighter ceiling (flat curve kept)")
+    parser.add_argument("--position", default="continuous", help="position prior: known, pixel-grid, continuous")
+    parser.add_argument("--width", default="continuous", help="width prior: known, pixel-grid, continuous")
+    parser.add_argument("--exposure", type=float, nargs=2, default=[0.85, 1.05], help="exposure prior (low high)")
+    parser.add_argument("--points", type=int, default=32, help="nuisance points per likelihood")
+    parser.add_argument("--exhaustive", action="store_true", help="every point of a discrete prior")
+    parser.add_argument("--convergence-width", type=int, help="width bin whose convergence against M is stored")
+    parser.add_argument("--out", type=Path, default=REPO / "leaderboard" / "studies" / "ideal_observer.json",
+                        help="the study json to merge into")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    return run_study(out_png=None if args.no_chart else REPO / "leaderboard" / "charts" / "ideal_observer.png",
+    prior = (NuisancePrior(args.position, args.width, tuple(args.exposure), args.points, args.exhaustive)
+             if args.marginal or args.marginal_only else None)
+    return run_study(out_json=args.out,
+                     out_png=None if args.no_chart else REPO / "leaderboard" / "charts" / "ideal_observer.png",
                      names=tuple(args.lens) if args.lens else None, widths_px=tuple(args.widths),
-                     precision=Precision(max_plates=args.max_plates), depth_only=args.depth_only, note=args.note)
+                     precision=Precision(max_plates=args.max_plates), depth_only=args.depth_only, note=args.note,
+                     marginal=prior, marginal_only=args.marginal_only, convergence_width_px=args.convergence_width)
 
 
 if __name__ == "__main__":

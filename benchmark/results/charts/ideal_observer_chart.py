@@ -1,9 +1,12 @@
 """The ideal observer's ceiling against plate width, per lens, with the leaderboard's readers on it.
 
 Top: the plate ceiling (left) and the mean per-character ceiling (right) of every lens of the
-study, T = 1 solid, T = 30 dashed, the PSF at each width's own distance dotted, the 5 % line.
-Bottom: one panel per lens, its T = 1 plate ceiling with the 95 % band and T = 30 dashed, and the
-entries whose lens spec the study matches. An entry whose plates carry their widths draws its
+study, T = 1 solid, T = 30 dashed, the PSF at each width's own distance dotted, the tighter
+(marginalised) T = 1 ceiling as a dash-dot step over each width bin where the study holds it, the 5 % line.
+Bottom: one panel per lens, its T = 1 genie plate ceiling with the 95 % band and T = 30 dashed, the
+tighter ceiling as a step per width bin, and the entries whose lens spec the study matches. Where both
+an entry's ensemble per width bin and the tighter ceiling exist, the privacy bracket [ensemble accuracy,
+tighter ceiling] is shaded per bin in the ensemble's colour. An entry whose plates carry their widths draws its
 ensemble's accuracy per width bin (a plate read by any chain, benchmark.results.ensemble; Wilson 95 %
 intervals, bins of fewer than MIN_BIN_PLATES plates left out) as a line against the ceiling: the
 attack gap at a glance. An older entry (no widths) draws every reader and chain's accuracy over all
@@ -112,8 +115,10 @@ def ideal_observer_figure(study: dict, entries: Sequence[Entry] = (), readers: d
         labels = [c.label() for c in curves]
         labels += [wrap_label(f"{m.reader} ({profile}, n={m.n_plates})") for profile, m in shown]
         labels += [wrap_label(f"{r} per width bin (reader study)") for r in dict.fromkeys(r for r, _ in study_points)]
-        n_entries = 2 + bool(grouped) + len(labels)
-        lines = n_entries + sum(label.count("\n") for label in labels)
+        # The tighter ceiling's line and one bracket entry per ensemble curve (each about two lines).
+        extra = (1 + len(curves)) if record.get("marginal", {}).get("t1") else 0
+        n_entries = 2 + bool(grouped) + len(labels) + extra
+        lines = n_entries + sum(label.count("\n") for label in labels) + extra
         panels_data.append((name, record, curves, shown, grouped, study_points, 1.3 * lines + 0.55 * n_entries))
     rows = [panels_data[i:i + _PANEL_COLS] for i in range(0, len(panels_data), _PANEL_COLS)]
     row_heights = [_TITLE_IN + _PANEL_H_IN + _XLABEL_IN + max(p[-1] for p in row) * _LEGEND_LINE_IN + 0.2
@@ -138,6 +143,10 @@ def ideal_observer_figure(study: dict, entries: Sequence[Entry] = (), readers: d
                     curve = record[frames]["curve"]
                     ax.plot(curve["widths_px"], 100 * np.asarray(curve[f"{key}_ceiling"], dtype=float), style,
                             color=colours[name], lw=1.3, label=name if frames == "t1" else None)
+            tighter = record.get("marginal", {}).get("t1")
+            if tighter:
+                xs, ys = _bin_steps(tighter["curve"], f"{key}_ceiling")
+                ax.plot(xs, ys, "-.", color=colours[name], lw=1.1)
             deep = record.get("at_own_distance", {}).get("t1")
             if deep:
                 ax.plot(deep["curve"]["widths_px"], 100 * np.asarray(deep["curve"][f"{key}_ceiling"], dtype=float),
@@ -148,8 +157,9 @@ def ideal_observer_figure(study: dict, entries: Sequence[Entry] = (), readers: d
     axes[1].tick_params(labelleft=False)
     axes[0].set_ylabel("ceiling on correct reads (%)", fontsize=FONT_PT)
     handles, labels = axes[0].get_legend_handles_labels()
-    handles += [Line2D([], [], color="0.3", ls=ls) for ls in ("-", "--", ":")] + [Line2D([], [], color="k", lw=0.8)]
-    labels += ["T = 1 (one frame)", "T = 30 frames", "PSF at own distance (T=1)", f"{100 * study['eps']:g} % line"]
+    handles += [Line2D([], [], color="0.3", ls=ls) for ls in ("-", "--", ":", "-.")] + [Line2D([], [], color="k", lw=0.8)]
+    labels += ["T = 1 (one frame)", "T = 30 frames", "PSF at own distance (T=1)",
+               "tighter ceiling per bin (T=1, nuisances unknown)", f"{100 * study['eps']:g} % line"]
     axes[1].legend(handles, labels, loc="upper left", bbox_to_anchor=(1.03, 1.0), borderaxespad=0.0, frameon=False,
                    fontsize=LEGEND_PT, title="lens", title_fontsize=LEGEND_PT, alignment="left")
     fig.text(_LEFT_IN / FIG_W_IN, 1 - 0.1 / height, "Ideal-observer ceiling against plate width, every lens of the study",
@@ -175,6 +185,22 @@ def ideal_observer_figure(study: dict, entries: Sequence[Entry] = (), readers: d
                 ax.tick_params(labelleft=False)
         row_top -= row_h
     return fig
+
+
+def _bin_steps(curve: dict, key: str = "plate_ceiling") -> tuple[np.ndarray, np.ndarray]:
+    """(x, y in %) of a marginalised curve drawn as a step over each of its width bins [w_k, high_k)."""
+    lows = np.asarray(curve["widths_px"], dtype=float)
+    highs = np.asarray(curve["width_high_px"], dtype=float)
+    values = 100 * np.asarray(curve[key], dtype=float)
+    return np.column_stack([lows, highs]).ravel(), np.repeat(values, 2)
+
+
+def _tighter_in_bin(curve: dict, low_px: float) -> float | None:
+    """The tighter ceiling (%) of the curve's bin holding `low_px`, None outside its bins."""
+    lows = np.asarray(curve["widths_px"], dtype=float)
+    highs = np.asarray(curve["width_high_px"], dtype=float)
+    inside = np.flatnonzero((lows <= low_px) & (low_px < highs))
+    return None if not len(inside) else 100 * float(curve["plate_ceiling"][int(inside[-1])])
 
 
 def _width_axis(ax) -> None:
@@ -203,12 +229,25 @@ def _lens_panel(ax, record: dict, curves: list[EnsembleCurve], shown: list, grou
         t30 = record["t30"]["curve"]
         ax.plot(t30["widths_px"], 100 * np.asarray(t30["plate_ceiling"], dtype=float), "k--", lw=0.8,
                 label="ceiling T=30")
+    tighter = record.get("marginal", {}).get("t1", {}).get("curve")
+    if tighter is not None:
+        xs, ys = _bin_steps(tighter)
+        ax.plot(xs, ys, "k-.", lw=1.1, label="tighter ceiling T=1 per bin (nuisances unknown)")
     for k, c in enumerate(curves):
         xs = [_bin_centre_px(b.low_px, b.high_px) for b in c.bins]
         acc = np.array([100 * b.accuracy.value for b in c.bins])
         low, high = (np.array([100 * b.accuracy.interval[i] for b in c.bins]) for i in (0, 1))
+        colour = PALETTE[k % len(PALETTE)]
         ax.errorbar(xs, acc, yerr=[acc - low, high - acc], fmt="D-", ms=3.5, lw=1.3, capsize=2,
-                    color=PALETTE[k % len(PALETTE)], label=c.label())
+                    color=colour, label=c.label())
+        for b, value in zip(c.bins, acc):
+            top = None if tighter is None else _tighter_in_bin(tighter, b.low_px)
+            if top is not None and np.isfinite(b.high_px):
+                ax.fill_between([b.low_px, b.high_px], [value] * 2, [max(top, value)] * 2, color=colour, alpha=0.15,
+                                lw=0)
+        if tighter is not None and any(_tighter_in_bin(tighter, b.low_px) is not None for b in c.bins):
+            ax.fill_between([], [], [], color=colour, alpha=0.15, lw=0,
+                            label=wrap_label(f"privacy bracket [ensemble, tighter ceiling] ({c.profile})"))
     order = shown + grouped
     lo, hi = 32.0, 160.0  # an older entry's readable plates (>= 32 px) up to the study's widest width
     if order:

@@ -8,7 +8,9 @@ ceiling is "not computed". Both specs are compared as today's lens code parses t
 the code has since dropped (`simulation.oversample`) or a default left out does not hide a match.
 
 Consistency. Every reader and chain of an entry is checked against its lens's T = 1 plate ceiling
-(`consistency.check_consistency`). Entries carry each chain's pooled accuracy over its readable
+(`consistency.check_consistency`): the genie's, a proven bound, whose crossing fails the row; a run
+also checks its bins against the tighter, marginalised ceiling where the record holds one
+(`record["marginal"]`, `marginal_t1_curve`) and reports a crossing of it alone, failing nothing. Entries carry each chain's pooled accuracy over its readable
 plates, so the entry check uses one bin from the smallest width they count
 (`benchmark.results.ensemble.pooled_min_width`: 32 px for entries scored before plates were scored
 from 8 px): a mixture of widths cannot beat the largest ceiling over them. A run checks its own per-plate
@@ -110,8 +112,15 @@ def study_record(study: Mapping[str, Any] | None, lens: str, spec: Mapping[str, 
 
 
 def t1_curve(record: Mapping[str, Any] | None) -> CeilingCurve | None:
-    """The T = 1 plate-ceiling curve of a study record (None: no record)."""
+    """The T = 1 genie plate-ceiling curve of a study record (None: no record)."""
     return None if record is None or "t1" not in record else CeilingCurve.from_dict(record["t1"]["curve"])
+
+
+def marginal_t1_curve(record: Mapping[str, Any] | None) -> CeilingCurve | None:
+    """The T = 1 marginalised (tighter) plate-ceiling curve of a study record (`record["marginal"]`, written
+    by `python -m benchmark.studies.observer_study --marginal`); None where the study has none (older records)."""
+    marginal = None if record is None else record.get("marginal")
+    return None if marginal is None or "t1" not in marginal else CeilingCurve.from_dict(marginal["t1"]["curve"])
 
 
 def entry_accuracies(entry: Entry) -> list[BinAccuracy]:
@@ -167,11 +176,20 @@ def plate_bins(records: Sequence[Mapping[str, Any]], bins_px: Sequence[int] = WI
             for (lens, attack, b), (hits, n) in sorted(counts.items())]
 
 
+def _crossing(v: Violation) -> dict[str, Any]:
+    return {"reader": v.measured.reader, "lens": v.measured.lens, "ceiling": v.ceiling, "low_px": v.measured.low_px,
+            "high_px": None if math.isinf(v.measured.high_px) else v.measured.high_px,
+            "accuracy": v.measured.accuracy, "interval": list(v.measured.interval),
+            "n_plates": v.measured.n_plates, "ceiling_high": v.ceiling_high, "message": v.message()}
+
+
 def run_violations(records: Sequence[Mapping[str, Any]], lens_info: Mapping[str, Mapping[str, Any]],
                    study: Mapping[str, Any] | None) -> dict[str, Any]:
     """The consistency check of a run (JSON-ready): which lenses were checked against the study, which
-    not and why, and every violation (with its message)."""
-    curves, not_checked = {}, {}
+    not and why, every violation of the genie's ceiling (`violations`, ceiling "genie": the rows fail)
+    and every bin above the tighter ceiling alone (`above_tighter`, ceiling "marginal": reported only),
+    each with its message; `tighter_checked`: the lenses whose record holds the tighter ceiling."""
+    curves, tighter, not_checked = {}, {}, {}
     for lens, info in lens_info.items():
         record = study_record(study, lens, info.get("spec"))
         if record is None:
@@ -181,25 +199,30 @@ def run_violations(records: Sequence[Mapping[str, Any]], lens_info: Mapping[str,
                                  + ", ".join(spec_differences(stored.get("lens_spec"), info.get("spec"))))
         else:
             curves[lens] = t1_curve(record)
+            if marginal_t1_curve(record) is not None:
+                tighter[lens] = marginal_t1_curve(record)
     measured = [m for m in plate_bins(records) if m.lens in curves]
     violations = check_consistency(measured, curves)
-    return {"summary": _summary_line(sorted(curves), not_checked, len(measured), len(violations)),
-            "study": str(STUDY), "checked": sorted(curves), "not_checked": not_checked,
-            "bins_checked": len(measured),
-            "violations": [{"reader": v.measured.reader, "lens": v.measured.lens, "low_px": v.measured.low_px,
-                            "high_px": None if math.isinf(v.measured.high_px) else v.measured.high_px,
-                            "accuracy": v.measured.accuracy, "interval": list(v.measured.interval),
-                            "n_plates": v.measured.n_plates, "ceiling_high": v.ceiling_high,
-                            "message": v.message()} for v in violations]}
+    failed = {(v.measured.lens, v.measured.reader, v.measured.low_px) for v in violations}
+    above = [v for v in check_consistency([m for m in measured if m.lens in tighter], tighter)
+             if (v.measured.lens, v.measured.reader, v.measured.low_px) not in failed]
+    return {"summary": _summary_line(sorted(curves), not_checked, len(measured), len(violations), sorted(tighter),
+                                     len(above)),
+            "study": str(STUDY), "checked": sorted(curves), "tighter_checked": sorted(tighter),
+            "not_checked": not_checked, "bins_checked": len(measured),
+            "violations": [_crossing(v) for v in violations], "above_tighter": [_crossing(v) for v in above]}
 
 
-def _summary_line(checked: Sequence[str], not_checked: Mapping[str, str], bins: int, violations: int) -> str:
-    """ceiling_check.json's first line: what was checked, against how many width bins, and why the
-    rest was not (`leaderboard/studies/ideal_observer.json` holds a lens's ceiling only for the spec
-    it was computed for: `python -m benchmark.studies.observer_study` recomputes it)."""
+def _summary_line(checked: Sequence[str], not_checked: Mapping[str, str], bins: int, violations: int,
+                  tighter: Sequence[str] = (), above_tighter: int = 0) -> str:
+    """ceiling_check.json's first line: what was checked, against how many width bins, against which
+    ceilings, and why the rest was not (`leaderboard/studies/ideal_observer.json` holds a lens's ceiling
+    only for the spec it was computed for: `python -m benchmark.studies.observer_study` recomputes it)."""
     parts = []
     if checked:
         parts.append(f"checked {', '.join(checked)} in {bins} width bin(s): {violations} violation(s)")
+        if tighter:
+            parts.append(f"{above_tighter} bin(s) above the tighter ceiling alone ({', '.join(tighter)})")
     else:
         parts.append("nothing checked")
     parts += [f"{lens} not checked: {why}" for lens, why in sorted(not_checked.items())]
@@ -213,8 +236,10 @@ def fail_above_ceiling(rows: Sequence[Row], violations: Sequence[Mapping[str, An
     """`rows` with every row of a chain that reads above its lens's ceiling (``run_violations``) failed:
     no honest attacker can, so the figure is a modelling or scoring error, or a reader that saw the
     answers, and never a result. The failed row keeps its settings and names the violation (stage
-    "score"); every seed of the chain fails, since the violation pools them."""
-    named = {(v["lens"], v["reader"]): v["message"] for v in violations}
+    "score"); every seed of the chain fails, since the violation pools them. Only the genie's ceiling
+    fails a row (a violation without a "ceiling" key is the genie's); a crossing of the tighter one is
+    no proof of an error and is passed over."""
+    named = {(v["lens"], v["reader"]): v["message"] for v in violations if v.get("ceiling", "genie") == "genie"}
     out = []
     for row in rows:
         message = named.get((row.lens, row.attack))
@@ -232,6 +257,8 @@ def write_run_check(out: Path, records: Sequence[Mapping[str, Any]], lens_info: 
     check = run_violations(records, lens_info, load_study(directory))
     for v in check["violations"]:
         log.error("%s", v["message"])
+    for v in check["above_tighter"]:
+        log.warning("%s", v["message"])
     path = Path(out) / "ceiling_check.json"
     path.write_text(json.dumps(check, indent=1) + "\n", encoding="utf-8")
     return path
