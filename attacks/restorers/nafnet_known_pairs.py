@@ -18,7 +18,6 @@ the package ships the scratch fit for the lens it ships (``benchmark.codesign.sh
 
 from __future__ import annotations
 
-import json
 import logging
 from typing import Any, ClassVar
 
@@ -43,8 +42,6 @@ from attacks.training.pair_psf import estimate_psf
 from attacks.training.psf_restorer_training import PretrainCurve, fine_tune, psf_inputs
 from attacks.training.restorer_training import fingerprint
 from safetensors import SafetensorError
-from safetensors.torch import load as load_safetensors
-from safetensors.torch import save as save_safetensors
 
 __all__ = ["ESTIMATED_PSF_PX", "STARTS", "NafnetKnownPairs", "NafnetKnownPairsTuned"]
 
@@ -128,6 +125,7 @@ class NafnetKnownPairs(Restorer):
                "pretrained": fingerprint(*(v for _, v in sorted(net.state_dict().items())))}
         stored = None if ctx.artifacts is None else ctx.artifacts.load(self.name, key)
         if stored is not None:
+            assert start.budget is not None  # set by load_pretrained
             try:
                 self.network, self.curve = unpack(stored, start.budget)
                 self.trained = False

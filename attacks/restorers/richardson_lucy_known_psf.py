@@ -32,7 +32,7 @@ from torch import Tensor
 from attacks.backends import real_fft
 from attacks.base import FitContext, FitReport, Restorer, ThreatModel
 from attacks.backends.real_fft import OtfCache, circular_filter, image_chunks
-from attacks.restorers.wiener_known_psf import edge_taper
+from attacks.backends.wiener import edge_taper
 
 __all__ = ["ITERATION_LADDER", "RichardsonLucyKnownPSF", "richardson_lucy", "richardson_lucy_iterates"]
 

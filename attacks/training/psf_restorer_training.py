@@ -44,7 +44,7 @@ from tqdm.auto import tqdm
 from attacks.backends.real_fft import OtfCache
 from attacks.base import FitCurve
 from attacks.networks.nafnet import NAFNet
-from attacks.restorers.wiener_known_psf import bayer_noise_sigma, wiener_chunks, wiener_deconvolve
+from attacks.backends.wiener import bayer_noise_sigma, wiener_chunks, wiener_deconvolve
 from attacks.training.lens_family import FamilyLens, LensFamily
 from attacks.training.restorer_training import negative_psnr
 
@@ -344,6 +344,7 @@ def fine_tune(model: NAFNet, inputs: Tensor, targets: Tensor, heldout_inputs: Te
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=max(max_steps, 1), eta_min=_LR_MIN)
     curve = PretrainCurve()
     t0 = time.perf_counter()
+    best: dict[str, Tensor] = {}
 
     def evaluate(step: int) -> None:
         model.eval()
@@ -357,7 +358,6 @@ def fine_tune(model: NAFNet, inputs: Tensor, targets: Tensor, heldout_inputs: Te
             best = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
         model.train()
 
-    best: dict[str, Tensor] = {}
     evaluate(0)
     next_eval = min(FINE_TUNE_FIRST_EVAL, max_steps)
     pool = [(inputs, targets)]

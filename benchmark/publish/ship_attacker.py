@@ -28,7 +28,8 @@ from attacks.readers.learned_reader import LearnedReader, pack_weights, pretrain
 from common.plate_render import PLATE_FORMAT
 from attacks.restorers.nafnet_generic import NafnetGeneric
 from attacks.restorers.nafnet_known_psf import PRETRAIN_SEED, SHIPPED_SCENES, NafnetKnownPSF, pack, shipped_key
-from attacks.training.psf_restorer_training import PSF_BUDGETS, pretrain
+from attacks.training.psf_restorer_training import PSF_BUDGETS
+from attacks.training.psf_restorer_training import pretrain as pretrain_known_psf
 from attacks.training.restorer_training import collect_pairs, data_identity
 from attacks.training.shipped_weights import write_shipped
 from benchmark.store.cache import cache_root
@@ -92,7 +93,7 @@ def ship_known_psf(args: argparse.Namespace) -> int:
     heldout = to_tensor(load_scenes(s["scenes"], s["heldout_split"], s["n_heldout"], size, s["scene_seed"]))
     budget = PSF_BUDGETS["full"]
     checkpoint = cache_root() / "pretrain" / f"nafnet-known-psf-s{PRETRAIN_SEED}.pt"
-    net, curve = pretrain(budget, train, heldout, PRETRAIN_SEED, checkpoint=checkpoint, progress=print)
+    net, curve = pretrain_known_psf(budget, train, heldout, PRETRAIN_SEED, checkpoint=checkpoint, progress=print)
     made = {"commit": git_commit(), "command": "python -m benchmark pretrain-attacker nafnet-known-psf",
             "seed": PRETRAIN_SEED, "fit_s": round(curve.seconds, 1), "threads": torch.get_num_threads(),
             "packages": package_versions(), "curve": curve.to_dict(),

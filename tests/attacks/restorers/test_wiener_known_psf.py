@@ -9,7 +9,7 @@ from scipy import ndimage
 from skimage.restoration import wiener as skimage_wiener
 
 import attacks
-from attacks.restorers.wiener_known_psf import estimate_noise_sigma, wiener_deconvolve
+from attacks.backends.wiener import estimate_noise_sigma, wiener_deconvolve
 
 
 def blur(x: torch.Tensor, psf: torch.Tensor, mode: str = "mirror") -> torch.Tensor:

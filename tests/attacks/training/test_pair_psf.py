@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from attacks.backends.real_fft import OtfCache
-from attacks.restorers.wiener_known_psf import bayer_noise_sigma, wiener_deconvolve
+from attacks.backends.wiener import bayer_noise_sigma, wiener_deconvolve
 from attacks.training.pair_psf import estimate_psf
 from benchmark.runner.sensing import to_tensor
 from benchmark.scenes.loading import load_scenes
