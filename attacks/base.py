@@ -293,6 +293,10 @@ class Attack(ABC):
     # True: a reference row (kind "reference"), not an attack: it shows a condition (e.g. the
     # uncorrected sensor image) and never counts as a lens's worst case.
     reference: ClassVar[bool] = False
+    # True: the attacker fits weights to data (training pairs, scenes, plates, a lens family). The runner
+    # records it in its rows (note ``learns``), and a learning attacker that loses to one that learns
+    # nothing, of an equal or weaker threat model, is flagged as under-fitted.
+    learns: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)

@@ -113,6 +113,7 @@ class LearnedReader(Reader):
     name: ClassVar[str] = "learned-reader"
     hints: ClassVar[frozenset[str]] = frozenset({"plate_boxes"})
     threat_model: ClassVar[ThreatModel] = ThreatModel.LENS_ACCESS
+    learns: ClassVar[bool] = True
     # No required field: with no lens (the sharp scenes) it reads with its sharp start (``fit``).
     requires: ClassVar[frozenset[str]] = frozenset()
     # In the standard ensemble (benchmark.runner.defaults.STANDARD_ENSEMBLE); --all-chains adds it too.

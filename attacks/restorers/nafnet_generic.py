@@ -73,6 +73,7 @@ class NafnetGeneric(Restorer):
 
     name: ClassVar[str] = "nafnet-generic"
     threat_model: ClassVar[ThreatModel] = ThreatModel.SENSOR_ACCESS
+    learns: ClassVar[bool] = True
 
     def __init__(self, checkpoint: str | Path | None = None, checkpoint_arch: dict[str, Any] | None = None,
                  backend: str = "onnx", use_shipped: bool = True) -> None:

@@ -73,6 +73,7 @@ class NafnetKnownPairs(Restorer):
 
     name: ClassVar[str] = "nafnet-known-pairs"
     threat_model: ClassVar[ThreatModel] = ThreatModel.KNOWN_PAIRS
+    learns: ClassVar[bool] = True
     requires: ClassVar[frozenset[str]] = frozenset({"lens", "train_pairs"})
 
     def __init__(self, start: str = "scratch", backend: str = "onnx", use_shipped: bool = True) -> None:

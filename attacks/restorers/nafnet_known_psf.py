@@ -96,6 +96,7 @@ class NafnetKnownPSF(Restorer):
 
     name: ClassVar[str] = "nafnet-known-psf"
     threat_model: ClassVar[ThreatModel] = ThreatModel.LENS_ACCESS
+    learns: ClassVar[bool] = True
     requires: ClassVar[frozenset[str]] = frozenset({"lens"})
 
     def __init__(self, use_shipped: bool = True) -> None:

@@ -32,6 +32,7 @@ class TrainingAdversary(Restorer):
 
     name: ClassVar[str] = "training-adversary"
     threat_model: ClassVar[ThreatModel] = ThreatModel.TRAINING_ADVERSARY
+    learns: ClassVar[bool] = True
     requires: ClassVar[frozenset[str]] = frozenset({"adversary"})
 
     def __init__(self, backend: str = "onnx") -> None:

@@ -75,6 +75,7 @@ STAGES = ("load", "fit", "restore", "read", "score", "measure")
 SHARP_LENS = "sharp"
 # The note a learned attacker's row carries when its fit stopped while still improving ("true"/"false").
 FIT_STILL_RISING = "fit_still_rising"
+LEARNS = "learns"  # note: "true" when the row's attacker (or a part of its chain) fits weights to data (Attack.learns)
 CHAIN_SEPARATOR = ">"
 # Kinds whose `attack` is the kind itself (no attacker involved).
 _SELF_NAMED = ("lens", "utility", "bound")

@@ -29,7 +29,7 @@ from benchmark.results.plate_scoring import PlateOutcome, check_read_limits, poo
 from benchmark.runner.rows import RowBuilder, plate_units, scene_units
 from benchmark.runner.config import RunConfig
 from benchmark.scenes import Scene
-from benchmark.results.schema import FIT_STILL_RISING, Row, RowError, chain_name
+from benchmark.results.schema import FIT_STILL_RISING, LEARNS, Row, RowError, chain_name
 from benchmark.runner.sensing import batches
 
 log = logging.getLogger(__name__)
@@ -235,6 +235,7 @@ class Attacked:
     described: dict[str, dict] = field(default_factory=dict)  # restorer name -> describe()
     references: set[str] = field(default_factory=set)          # restorers marked `reference`
     threat_models: dict[str, attacks.ThreatModel] = field(default_factory=dict)  # restorer name -> its own
+    learns: dict[str, bool] = field(default_factory=dict)  # restorer name -> its Attack.learns
     # restorer -> {window index: restored window}, only the windows the plate gallery shows
     # (gallery_windows): the others are read as soon as they are restored, then dropped.
     restored_plates: dict[str, dict[int, torch.Tensor]] = field(default_factory=dict)
@@ -319,6 +320,7 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
     out.restored[attacker.name] = restored
     out.described[attacker.name] = described
     out.threat_models[attacker.name] = attacker.threat_model
+    out.learns[attacker.name] = attacker.learns
     if kind == "reference":
         out.references.add(attacker.name)
     for reader in readers:
@@ -330,7 +332,8 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
     del images
     metrics.update({"fit_s": float(fit_s), "images_per_s": target.sharp.shape[0] / run_s})
     row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
-                   threat_model=attacker.threat_model.value, settings=settings, notes=fit_notes(error))
+                   threat_model=attacker.threat_model.value, settings=settings,
+                   notes={**fit_notes(error), LEARNS: _flag(attacker.learns)})
     scene_intervals(row, per_image, seed=row.seed)
     row.set_units(scene_units(target.scenes, per_image))
     out.rows.append(row)
@@ -354,6 +357,10 @@ class ReadyReader:
     fit_error: RowError | None
     described: dict = field(default_factory=dict)
     notes: dict[str, str] = field(default_factory=dict)  # what its fit says of itself (`fit_notes`)
+
+
+def _flag(value: bool) -> str:
+    return "true" if value else "false"
 
 
 def fit_notes(report: object) -> dict[str, str]:
@@ -434,7 +441,8 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
     # The row's pooled figures count the readable plates; its units hold every scored plate (from 8 px).
     readable_outcomes = pooled(outcomes)
     row = rows.row(kind, {**summarise(readable_outcomes), **timing}, attack=chain, restorer=restorer, reader=reader.name,
-                   threat_model=threat.value, settings=settings, notes=dict(ready.notes))
+                   threat_model=threat.value, settings=settings,
+                   notes={**ready.notes, LEARNS: _flag(ready.reader.learns or out.learns.get(restorer or "", False))})
     plate_intervals(row, readable_outcomes)
     row.set_units(plate_units(outcomes))
     chain_rows.append(row)
