@@ -7,7 +7,7 @@ camera's TRAIN split. Two starts (``start``):
   (``attacks.training.pair_psf``: it is not given them), and fine-tunes the restorer pre-trained
   across the lens family (``nafnet-known-psf``, fed the Wiener estimate with the measured PSF) on the
   pairs until the held-out PSNR of the last eighth of them flattens on a log-step axis
-  (``attacks.training.psf_restorer_training.fine_tune``; at most twice the profile's
+  (``attacks.training.psf_restorer_training.fine_tune``; at most the profile's
   ``restorer_steps``; the pre-trained start is kept when no step beats it).
 - "scratch" (default): a NAFNet of the profile's size (``restorer_steps``, ``nafnet_width``, ``nafnet_*_blocks``)
   trained from random weights with NAFNet's recipe (``attacks.training.restorer_training``).
@@ -138,7 +138,7 @@ class NafnetKnownPairs(Restorer):
         h, w = inputs.shape[-2:]
         centre = (slice(None), slice(None), slice(h // 4, h // 4 + h // 2), slice(w // 4, w // 4 + w // 2))
         self.curve = fine_tune(net, inputs[:-held], sharp[:-held], inputs[-held:][centre], sharp[-held:][centre],
-                               max_steps=2 * budget.steps, crop_px=budget.crop_px, batch_size=budget.batch_size,
+                               max_steps=budget.steps, crop_px=budget.crop_px, batch_size=budget.batch_size,
                                seed=ctx.seed, device=ctx.device)
         self.network, self.trained = net, True
         if ctx.artifacts is not None:

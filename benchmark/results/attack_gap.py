@@ -6,7 +6,8 @@ only where the study used the lens's own spec: ``benchmark.results.observer.publ
 minus the ensemble's accuracy in the bin (``benchmark.results.ensemble``). The ceiling is the tighter,
 marginalised one (``observer.marginal``: the ideal observer not told the plate's position, scale and
 exposure) where the study holds it, its value for the bin that starts at the bin's lower edge (the
-bin's average over the width prior); else the genie's at the bin's lower edge (it rises with width,
+bin's average over the width prior); else (and in bins the tighter curve does not tabulate) the
+genie's at the bin's lower edge (it rises with width,
 so that is the least over the bin and the gap a lower bound on the bin's mean gap). ``Gap.ceiling_kind``
 says which. Plate units without recorded widths give one bin, every readable
 plate (>= LEGACY_READABLE_MIN_WIDTH_PX): the gap "at 32 px". Its 95 % interval combines the ceiling's
@@ -48,7 +49,7 @@ from benchmark.results.observer.published import marginal_t1_curve, study_record
 from benchmark.results.schema import FIT_STILL_RISING, Row, threat_models
 
 __all__ = ["CEILING_ALARM", "FLAG_KINDS", "GAP_ALARM", "GAP_WIDTHS_PX", "Flag", "Gap", "attack_gaps", "entry_flags",
-           "entry_gaps", "gap_curve", "lens_flags"]
+           "entry_gaps", "gap_curves", "lens_flags"]
 
 GAP_ALARM = 0.30
 CEILING_ALARM = 0.50
@@ -131,9 +132,10 @@ def _ceiling_at(curve: CeilingCurve, width_px: float) -> tuple[float, tuple[floa
     return value, (min(low, value), max(high, value))
 
 
-def attack_gaps(ensemble: PlateEnsemble, curve: CeilingCurve) -> list[Gap]:
+def attack_gaps(ensemble: PlateEnsemble, curve: CeilingCurve, fallback: CeilingCurve | None = None) -> list[Gap]:
     """The gap per width bin of the ensemble (one pooled bin from its smallest pooled width where its
-    plates carry no widths), for bins whose lower edge the curve tabulates."""
+    plates carry no widths), for bins whose lower edge the curve tabulates, else (given) `fallback`
+    tabulates (the genie's curve beside a tighter one computed on fewer widths)."""
     if ensemble.bins is None:
         bins: list[tuple[float, float, Accuracy, bool]] = [
             (ensemble.min_width_px(), math.inf, ensemble.accuracy, True)]
@@ -141,9 +143,12 @@ def attack_gaps(ensemble: PlateEnsemble, curve: CeilingCurve) -> list[Gap]:
         bins = [(b.low_px, b.high_px, b.accuracy, False) for b in ensemble.bins]
     out = []
     for low, high, accuracy, pooled in bins:
+        used = curve
         found = _ceiling_at(curve, low)
+        if found is None and fallback is not None:
+            used, found = fallback, _ceiling_at(fallback, low)
         if found is not None and accuracy.n:
-            out.append(Gap(low, high, found[0], found[1], accuracy, pooled, curve.kind))
+            out.append(Gap(low, high, found[0], found[1], accuracy, pooled, used.kind))
     return out
 
 
@@ -152,18 +157,21 @@ def _curve(study: Mapping[str, Any] | None, lens: str, spec: Mapping[str, Any] |
     return t1_curve(study_record(study, lens, spec))
 
 
-def gap_curve(study: Mapping[str, Any] | None, lens: str, spec: Mapping[str, Any] | None) -> CeilingCurve | None:
-    """The curve the gap is taken against: the tighter (marginalised) T = 1 curve where the study's record
-    of the lens holds one, else the genie's; None where the study does not cover the lens's spec."""
+def gap_curves(study: Mapping[str, Any] | None, lens: str, spec: Mapping[str, Any] | None
+               ) -> tuple[CeilingCurve | None, CeilingCurve | None]:
+    """(curve, fallback) the gap is taken against: the tighter (marginalised) T = 1 curve where the
+    study's record of the lens holds one, with the genie's for the bins it does not tabulate; else the
+    genie's alone; (None, None) where the study does not cover the lens's spec."""
     record = study_record(study, lens, spec)
-    return marginal_t1_curve(record) or t1_curve(record)
+    genie, tighter = t1_curve(record), marginal_t1_curve(record)
+    return (genie, None) if tighter is None else (tighter, genie)
 
 
 def entry_gaps(entry: Entry, study: Mapping[str, Any] | None, attacks: set[str] | None = None) -> list[Gap]:
     """The entry's gaps (none where the study does not cover its lens spec or no chain has plate units)."""
-    curve = gap_curve(study, entry.lens, entry.lens_spec)
+    curve, fallback = gap_curves(study, entry.lens, entry.lens_spec)
     ensemble = None if curve is None else plate_ensemble(entry.rows, attacks)
-    return [] if curve is None or ensemble is None else attack_gaps(ensemble, curve)
+    return [] if curve is None or ensemble is None else attack_gaps(ensemble, curve, fallback)
 
 
 def _family(name: str) -> str:
@@ -284,9 +292,9 @@ def lens_flags(lens: str, profile: str, rows: Iterable[Row], spec: Mapping[str, 
                           f"{attack}'s fit was still improving when it stopped (seed{'s' if len(seeds) > 1 else ''} "
                           f"{','.join(map(str, sorted(seeds)))}): its figures are a lower bound on that attacker"))
     flags += [Flag(lens, profile, "untrained-beats-trained", m) for m in _stronger_untrained(rows)]
-    against = tighter or curve
+    against, fallback = (curve, None) if tighter is None else (tighter, curve)
     ensemble = None if against is None else plate_ensemble(rows)
-    for gap in [] if ensemble is None or against is None else attack_gaps(ensemble, against):
+    for gap in [] if ensemble is None or against is None else attack_gaps(ensemble, against, fallback):
         if gap.ceiling > CEILING_ALARM and gap.gap > GAP_ALARM:
             which = "tighter (marginalised) ceiling" if gap.ceiling_kind == "marginal" else "ceiling (genie)"
             flags.append(Flag(lens, profile, "attack-gap",

@@ -86,7 +86,7 @@ def _timed_marginal(lens: Lens, widths_px: tuple[int, ...], frames: tuple[int, .
     """The tighter ceiling's summaries (t1, ...) per width bin, with its seconds, load before and after,
     widths, bin ends, prior and precision, and (convergence_width_px given) its convergence at that bin."""
     load_before, t0 = _load_average(), time.perf_counter()
-    curves = marginal_ceiling_curves(lens, widths_px, frames, prior=prior, seed=seed, precision=precision)
+    curves = marginal_ceiling_curves(lens, widths_px, frames, prior=prior, seed=seed, precision=precision, pair=(0, 1))
     out = {"seconds": time.perf_counter() - t0, "load_average": [load_before, _load_average()],
            "widths_px": list(widths_px), "width_high_px": curves[0].width_high_px.tolist(),
            "precision": dataclasses.asdict(precision), "prior": dataclasses.asdict(prior),

@@ -30,11 +30,18 @@ informative as M (drop a point known to be false and M remain). The ceiling fall
 limit. From below, the same mixture rule applied to observations whose nuisance is drawn afresh
 (not one of the M points) is a decision rule an attacker who knows the prior can run, so its hit rate
 (`rule_*`) is at or below the limit. [rule, ceiling] brackets the limit at every M; `convergence`
-tabulates both against M.
+tabulates both against M. Where the data pin the nuisances far more tightly than the prior spreads
+them, the M-point observer picks out the true point and the ceiling falls slowly with M while the rule
+(whose points all miss the truth) stays low: the curve shows it. A discrete prior (position and width
+on the pixel grid, exposure known) is averaged over its whole support instead (`NuisancePrior.exhaustive`):
+S is then every point, it tells the observer nothing, and the ceiling is the marginalised observer's
+itself, with Monte-Carlo error only over plates and noise (`rule_*` then estimates the same accuracy
+by hit rate).
 
 Per block and plate as in the genie: per-character ceilings c_i with every other character revealed,
-the plate bound min_i c_i (no pair block: 676 hypotheses at M points each cost more than the bound is
-worth above 5 %, where this ceiling is used). The plate texts and the observation noise come from the
+and (`pair`) the first two letters read jointly, the plate bound the least of them. The pair's 676
+hypotheses at M points each are scored on a random subset of true hypotheses (`pair_truths`), an
+unbiased estimate of the same ceiling; its rule is not computed. The plate texts and the observation noise come from the
 genie's random stream (the same seed draws the same plates), the nuisance points, the true nuisance's
 index and the fresh-nuisance observations from a second stream: with the prior collapsed to the genie's
 point the curve is the genie's (`ceiling_curves(..., pair=None)`) to rounding.
@@ -57,6 +64,7 @@ import numpy as np
 import torch
 
 from benchmark.results.observer.ceiling import Camera, CeilingCurve, PlateModel, Precision, _interval
+from benchmark.results.plate_scoring import WIDTH_BINS_PX
 from benchmark.results.observer.nuisance import NuisancePrior, Nuisance, canvas_size, draw_points, nuisance_means, support
 from common.plate_render import format_alphabets, random_plate_text
 from lenses.raw_likelihood import draw_statistics, log_likelihoods
@@ -111,13 +119,15 @@ def _block_texts(text: str, position: int, fmt: str) -> list[str]:
 
 def marginal_position_accuracies(camera: Camera, width_px: int, width_high_px: float, frames: tuple[int, ...],
                                  model: PlateModel, prior: NuisancePrior, n_plates: int, noise_draws: int,
-                                 rng: np.random.Generator, nuisance_rng: np.random.Generator) -> np.ndarray:
-    """(n_plates, len(frames), L, 2) per-plate (ceiling, rule) estimates of each position's marginalised
-    c_i at one width bin [width_px, width_high_px); the M points are shared by a plate's positions."""
+                                 rng: np.random.Generator, nuisance_rng: np.random.Generator,
+                                 pair: tuple[int, int] | None = None, pair_truths: int = 64) -> np.ndarray:
+    """(n_plates, len(frames), L [+ 1], 2) per-plate (ceiling, rule) estimates of each position's
+    marginalised c_i at one width bin [width_px, width_high_px), and of the pair's c_pair as a last
+    column when `pair` is given (`pair_accuracy`; its rule NaN); the M points are shared by a plate's blocks."""
     height_of = model.height_px
     canvas = canvas_size(prior, width_px, width_high_px, model.aspect, height_of)
     n_pos = len(model.fmt)
-    out = np.empty((n_plates, len(frames), n_pos, 2))
+    out = np.full((n_plates, len(frames), n_pos + (pair is not None), 2), np.nan)
     for j in range(n_plates):
         text = random_plate_text(rng, model.fmt)
         points = (support(prior, width_px, width_high_px, height_of) if prior.exhaustive
@@ -130,7 +140,40 @@ def marginal_position_accuracies(camera: Camera, width_px: int, width_high_px: f
                                                 canvas, model, prior.on_grid)[0] for t in texts])
             for n, t in enumerate(frames):
                 out[j, n, i] = mixture_accuracy(means, fresh, camera.read_noise_e, t, noise_draws, rng, nuisance_rng)
+        if pair is not None:
+            out[j, :, n_pos, 0] = pair_accuracy(camera, text, pair, frames, model, prior, points, canvas, pair_truths,
+                                                rng, nuisance_rng)
     return out
+
+
+def pair_accuracy(camera: Camera, text: str, pair: tuple[int, int], frames: tuple[int, ...], model: PlateModel,
+                  prior: NuisancePrior, points: list[Nuisance], canvas: tuple[int, int], truths: int,
+                  rng: np.random.Generator, nuisance_rng: np.random.Generator, chunk: int = 26) -> np.ndarray:
+    """(len(frames),) the M-point ceiling of reading the positions `pair` jointly (every other character
+    revealed): E max_a P(a | y, S) over `truths` observations, each of a hypothesis and a point drawn
+    uniformly (an unbiased estimate with fewer observations than the |A|^2 hypotheses). The hypotheses'
+    means are computed `chunk` texts at a time and every pixel of the canvas kept (no mask across chunks)."""
+    alphabets = format_alphabets(model.fmt)
+    texts = []
+    for a in alphabets[pair[0]]:
+        for b in alphabets[pair[1]]:
+            chars = list(text)
+            chars[pair[0]], chars[pair[1]] = a, b
+            texts.append("".join(chars))
+    n_pts = len(points)
+    truth = nuisance_rng.integers(len(texts), size=truths)
+    point = nuisance_rng.integers(n_pts, size=truths)
+    truth_means = torch.cat([nuisance_means(camera, [texts[a]], [points[m]], canvas, model, prior.on_grid)[0]
+                             for a, m in zip(truth, point)])
+    stats = [draw_statistics(truth_means, camera.read_noise_e, t, rng) for t in frames]
+    loglik = [[] for _ in frames]
+    for start in range(0, len(texts), chunk):
+        means = nuisance_means(camera, texts[start:start + chunk], points, canvas, model, prior.on_grid)
+        flat = means.reshape(-1, means.shape[-1])
+        for n, (t, (s1, s2)) in enumerate(zip(frames, stats)):
+            ll = log_likelihoods(s1, s2, t, flat, camera.read_noise_e).reshape(truths, -1, n_pts)
+            loglik[n].append(torch.logsumexp(ll, -1) - math.log(n_pts))
+    return np.array([float(torch.softmax(torch.cat(ll, -1), -1).max(-1).values.mean()) for ll in loglik])
 
 
 def _fresh(prior: NuisancePrior, width_px: int, width_high_px: float, model: PlateModel, n: int,
@@ -138,24 +181,28 @@ def _fresh(prior: NuisancePrior, width_px: int, width_high_px: float, model: Pla
     return draw_points(prior, width_px, width_high_px, model.aspect, n, nuisance_rng, model.height_px)
 
 
-def bin_highs(widths_px: list[int]) -> list[float]:
-    """Each tabulated width's bin end: the next width; the last width's at the same ratio as the one before
-    (a single width: 1.5 x)."""
-    ratio = widths_px[-1] / widths_px[-2] if len(widths_px) > 1 else 1.5
-    return [float(b) for b in widths_px[1:]] + [widths_px[-1] * ratio]
+def bin_highs(widths_px: list[int], edges_px: tuple[int, ...] = WIDTH_BINS_PX) -> list[float]:
+    """Each tabulated width's bin end: the next tabulated width or the next edge of the plate-scoring bins
+    (`edges_px`), whichever comes first; past the last edge, 1.5 x the width."""
+    nexts = [*widths_px[1:], math.inf]
+    return [float(min(n, next((e for e in edges_px if e > w), 1.5 * w))) for w, n in zip(widths_px, nexts)]
 
 
 def marginal_ceiling_curves(lens: torch.nn.Module, widths_px: tuple[int, ...] | list[int],
                             frames: tuple[int, ...] = (1,), model: PlateModel = PlateModel(),
                             prior: NuisancePrior = DEFAULT_PRIOR, seed: int = 0, noise_draws: int = 2,
                             precision: Precision = Precision(),
-                            width_high_px: list[float] | None = None) -> list[CeilingCurve]:
+                            width_high_px: list[float] | None = None, pair: tuple[int, int] | None = None,
+                            pair_until: float = 0.10, pair_truths: int = 64) -> list[CeilingCurve]:
     """One `CeilingCurve` per frame count of the marginalised ceiling (module docstring) through `lens`.
 
     Tabulated width w_k stands for the bin [w_k, width_high_px[k]) (default `bin_highs`: the next
     tabulated width), over which `prior` spreads the width; `position_ceiling`, `plate_ceiling` and their
     intervals are the M-point ceiling (an upper bound at any M), `rule_plate` the fresh-nuisance rule
     (a lower end of the limit). Plate draws are added until `precision` is met on the ceiling's intervals.
+    pair: two positions read jointly (`pair_accuracy`, `pair_truths` observations per plate), as in the
+    genie's `ceiling_curves`: from the smallest width until its lower 95 % limit exceeds `pair_until`;
+    the plate ceiling is then the least of the singles and the pair.
     """
     widths = [int(w) for w in widths_px]
     if not widths or any(w < 4 for w in widths):
@@ -169,33 +216,46 @@ def marginal_ceiling_curves(lens: torch.nn.Module, widths_px: tuple[int, ...] | 
     rng, nuisance_rng = np.random.default_rng(seed), np.random.default_rng((seed, NUISANCE_STREAM))
     camera = Camera.of(lens)
     results = []
+    n_pos, active = len(model.fmt), pair
     for w, high in zip(widths, highs):
         def draw(n: int) -> np.ndarray:
             return marginal_position_accuracies(camera, w, high, tuple(frames), model, prior, n, noise_draws, rng,
-                                                nuisance_rng)
+                                                nuisance_rng, active, pair_truths)
         samples = draw(precision.min_plates)
         while not precision.met(_interval(samples[..., 0])[1]) and samples.shape[0] < precision.max_plates:
             samples = np.concatenate([samples, draw(precision.batch)])
         results.append((samples, precision.met(_interval(samples[..., 0])[1])))
+        if active is not None and (_interval(samples[..., n_pos, 0])[1][:, 0] > pair_until).all():
+            active = None
     seconds = time.perf_counter() - t0
-    return [_curve(lens.spec.name, t, n, widths, highs, results, model, prior, noise_draws, precision, seconds)
+    return [_curve(lens.spec.name, t, n, widths, highs, results, model, prior, noise_draws, precision, seconds, pair)
             for n, t in enumerate(frames)]
 
 
 def _curve(name: str, frames: int, n: int, widths: list[int], highs: list[float], results: list, model: PlateModel,
-           prior: NuisancePrior, noise_draws: int, precision: Precision, seconds: float) -> CeilingCurve:
+           prior: NuisancePrior, noise_draws: int, precision: Precision, seconds: float,
+           pair: tuple[int, int] | None) -> CeilingCurve:
     """The CeilingCurve of frame index n from per-width samples (n_plates, F, L, 2)."""
-    upper = [s[:, n, :, 0] for s, _ in results]
-    rule = [s[:, n, :, 1] for s, _ in results]
+    n_pos = len(model.fmt)
+    upper = [s[:, n, :n_pos, 0] for s, _ in results]
+    rule = [s[:, n, :n_pos, 1] for s, _ in results]
     position, position_interval = (np.stack(v) for v in zip(*(_interval(s) for s in upper)))
     char, char_interval = (np.stack(v) for v in zip(*(_interval(s.mean(1)) for s in upper)))
     rule_position, rule_position_interval = (np.stack(v) for v in zip(*(_interval(s) for s in rule)))
-    plate_interval = np.stack([position_interval[..., 0].min(1), position_interval[..., 1].min(1)], -1)
+    pair_ceiling, pair_interval = np.full(len(widths), np.nan), np.full((len(widths), 2), np.nan)
+    for k, (s, _) in enumerate(results):
+        if s.shape[2] > n_pos:
+            pair_ceiling[k], pair_interval[k] = _interval(s[:, n, n_pos, 0])
+    # As the genie's: the least block ceiling, its interval the least of the blocks' interval ends.
+    plate = np.fmin(position.min(1), pair_ceiling)
+    plate_interval = np.stack([np.fmin(position_interval[..., 0].min(1), pair_interval[:, 0]),
+                               np.fmin(position_interval[..., 1].min(1), pair_interval[:, 1])], -1)
     rule_interval = np.stack([rule_position_interval[..., 0].min(1), rule_position_interval[..., 1].min(1)], -1)
     return CeilingCurve(
         lens=name, frames=frames, widths_px=np.asarray(widths), char_ceiling=char, char_interval=char_interval,
-        position_ceiling=position, position_interval=position_interval, plate_ceiling=position.min(1),
-        plate_interval=plate_interval, n_plates=np.asarray([s.shape[0] for s in upper]),
+        position_ceiling=position, position_interval=position_interval, plate_ceiling=plate,
+        plate_interval=plate_interval, pair_positions=pair, pair_ceiling=pair_ceiling, pair_interval=pair_interval,
+        n_plates=np.asarray([s.shape[0] for s in upper]),
         converged=np.asarray([c for _, c in results]), noise_draws=noise_draws,
         interval_width=precision.interval_width, seconds=seconds, model=model, prior=prior,
         width_high_px=np.asarray(highs), rule_plate=rule_position.min(1), rule_interval=rule_interval)

@@ -45,6 +45,12 @@ def test_the_marginalised_ceiling_never_exceeds_the_genies():
     (tight,) = marginal_ceiling_curves(lens, (8, 12), prior=NuisancePrior(points=8), precision=FEW, seed=0)
     assert (tight.plate_interval[:, 0] <= genie.plate_interval[:, 1]).all()
     assert (tight.rule_plate <= tight.plate_ceiling).all()
+    # The exact marginal over the four RGGB parities (every point of a discrete prior) at a known width:
+    # at most the genie's at that width (told the parity), same plates and noise.
+    (at_width,) = ceiling_curves(lens, (8, 12), precision=FEW, pair=None, seed=0)
+    parity = NuisancePrior("pixel-grid", "known", (PlateModel().exposure,) * 2, exhaustive=True)
+    (exact,) = marginal_ceiling_curves(lens, (8, 12), prior=parity, precision=FEW, seed=0)
+    assert (exact.position_interval[..., 0] <= at_width.position_interval[..., 1]).all()
 
 
 def _shifted_bump(centre_px: np.ndarray, amplitude_e: float, base_e: float) -> np.ndarray:
@@ -218,6 +224,21 @@ def test_curves_round_trip_through_json_and_old_records_have_no_tighter_ceiling(
     assert published.t1_curve(record).kind == "genie"
     if "marginal" not in record:
         assert published.marginal_t1_curve(record) is None
+
+
+@pytest.mark.slow
+def test_the_pair_block_at_the_genies_point_agrees_with_the_genies_pair():
+    """The first two letters read jointly (676 hypotheses, 64 sampled truths per plate) with the prior at the
+    genie's point: the genie's pair ceiling within the two Monte-Carlo intervals (defocus, 8 px, near chance,
+    where the pair certifies what no single letter can)."""
+    lens = lenses.load("defocus")
+    few = Precision(min_plates=3, batch=3, max_plates=3)
+    (genie,) = ceiling_curves(lens, (8,), precision=few, seed=0)
+    (point,) = marginal_ceiling_curves(lens, (8,), prior=NuisancePrior.known(PlateModel().exposure), precision=few,
+                                       seed=0, pair=(0, 1))
+    assert point.pair_ceiling[0] < 1 / 26 and point.plate_ceiling[0] == point.pair_ceiling[0]
+    low, high = point.pair_interval[0]
+    assert low - 0.01 <= genie.pair_ceiling[0] <= high + 0.01
 
 
 @pytest.mark.slow
