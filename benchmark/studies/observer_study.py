@@ -22,9 +22,10 @@ import logging
 import os
 import time
 from pathlib import Path
+from typing import Any
 
 from benchmark.results.observer.ceiling import CeilingCurve, PlateModel, Precision, ceiling_curves, certified_width
-from benchmark.results.observer.marginal import convergence, marginal_ceiling_curves
+from benchmark.results.observer.marginal import bin_highs, convergence, marginal_ceiling_curves
 from benchmark.results.observer.nuisance import NuisancePrior
 from lenses import Lens, parse_spec
 
@@ -86,11 +87,13 @@ def _timed_marginal(lens: Lens, widths_px: tuple[int, ...], frames: tuple[int, .
     """The tighter ceiling's summaries (t1, ...) per width bin, with its seconds, load before and after,
     widths, bin ends, prior and precision, and (convergence_width_px given) its convergence at that bin."""
     load_before, t0 = _load_average(), time.perf_counter()
-    curves = marginal_ceiling_curves(lens, widths_px, frames, prior=prior, seed=seed, precision=precision, pair=(0, 1))
-    out = {"seconds": time.perf_counter() - t0, "load_average": [load_before, _load_average()],
-           "widths_px": list(widths_px), "width_high_px": curves[0].width_high_px.tolist(),
-           "precision": dataclasses.asdict(precision), "prior": dataclasses.asdict(prior),
-           **{f"t{c.frames}": summary(c) for c in curves}}
+    highs = bin_highs(list(widths_px))
+    curves = marginal_ceiling_curves(lens, widths_px, frames, prior=prior, seed=seed, precision=precision,
+                                     width_high_px=highs, pair=(0, 1))
+    out: dict[str, Any] = {"seconds": time.perf_counter() - t0, "load_average": [load_before, _load_average()],
+                           "widths_px": list(widths_px), "width_high_px": highs,
+                           "precision": dataclasses.asdict(precision), "prior": dataclasses.asdict(prior),
+                           **{f"t{c.frames}": summary(c) for c in curves}}
     if convergence_width_px is not None:
         k = list(widths_px).index(convergence_width_px)
         t1 = time.perf_counter()

@@ -145,8 +145,8 @@ def ideal_observer_figure(study: dict, entries: Sequence[Entry] = (), readers: d
                             color=colours[name], lw=1.3, label=name if frames == "t1" else None)
             tighter = record.get("marginal", {}).get("t1")
             if tighter:
-                xs, ys = _bin_steps(tighter["curve"], f"{key}_ceiling")
-                ax.plot(xs, ys, "-.", color=colours[name], lw=1.1)
+                step_x, step_y = _bin_steps(tighter["curve"], f"{key}_ceiling")
+                ax.plot(step_x, step_y, "-.", color=colours[name], lw=1.1)
             deep = record.get("at_own_distance", {}).get("t1")
             if deep:
                 ax.plot(deep["curve"]["widths_px"], 100 * np.asarray(deep["curve"][f"{key}_ceiling"], dtype=float),
@@ -159,7 +159,7 @@ def ideal_observer_figure(study: dict, entries: Sequence[Entry] = (), readers: d
     handles, labels = axes[0].get_legend_handles_labels()
     handles += [Line2D([], [], color="0.3", ls=ls) for ls in ("-", "--", ":", "-.")] + [Line2D([], [], color="k", lw=0.8)]
     labels += ["T = 1 (one frame)", "T = 30 frames", "PSF at own distance (T=1)",
-               "tighter ceiling per bin (T=1, nuisances unknown)", f"{100 * study['eps']:g} % line"]
+               "tighter ceiling per bin (T=1)", f"{100 * study['eps']:g} % line"]
     axes[1].legend(handles, labels, loc="upper left", bbox_to_anchor=(1.03, 1.0), borderaxespad=0.0, frameon=False,
                    fontsize=LEGEND_PT, title="lens", title_fontsize=LEGEND_PT, alignment="left")
     fig.text(_LEFT_IN / FIG_W_IN, 1 - 0.1 / height, "Ideal-observer ceiling against plate width, every lens of the study",
@@ -231,8 +231,8 @@ def _lens_panel(ax, record: dict, curves: list[EnsembleCurve], shown: list, grou
                 label="ceiling T=30")
     tighter = record.get("marginal", {}).get("t1", {}).get("curve")
     if tighter is not None:
-        xs, ys = _bin_steps(tighter)
-        ax.plot(xs, ys, "k-.", lw=1.1, label="tighter ceiling T=1 per bin (nuisances unknown)")
+        step_x, step_y = _bin_steps(tighter)
+        ax.plot(step_x, step_y, "k-.", lw=1.1, label="tighter ceiling T=1 per bin (nuisances unknown)")
     for k, c in enumerate(curves):
         xs = [_bin_centre_px(b.low_px, b.high_px) for b in c.bins]
         acc = np.array([100 * b.accuracy.value for b in c.bins])

@@ -64,9 +64,10 @@ import numpy as np
 import torch
 
 from benchmark.results.observer.ceiling import Camera, CeilingCurve, PlateModel, Precision, _interval
+from benchmark.results.observer.nuisance import Nuisance, NuisancePrior, canvas_size, draw_points, nuisance_means, support
 from benchmark.results.plate_scoring import WIDTH_BINS_PX
-from benchmark.results.observer.nuisance import NuisancePrior, Nuisance, canvas_size, draw_points, nuisance_means, support
 from common.plate_render import format_alphabets, random_plate_text
+from lenses.lens import Lens
 from lenses.raw_likelihood import draw_statistics, log_likelihoods
 
 NUISANCE_STREAM = 1  # the nuisance generator is default_rng((seed, NUISANCE_STREAM))
@@ -166,7 +167,7 @@ def pair_accuracy(camera: Camera, text: str, pair: tuple[int, int], frames: tupl
     truth_means = torch.cat([nuisance_means(camera, [texts[a]], [points[m]], canvas, model, prior.on_grid)[0]
                              for a, m in zip(truth, point)])
     stats = [draw_statistics(truth_means, camera.read_noise_e, t, rng) for t in frames]
-    loglik = [[] for _ in frames]
+    loglik: list[list[torch.Tensor]] = [[] for _ in frames]
     for start in range(0, len(texts), chunk):
         means = nuisance_means(camera, texts[start:start + chunk], points, canvas, model, prior.on_grid)
         flat = means.reshape(-1, means.shape[-1])
@@ -188,7 +189,7 @@ def bin_highs(widths_px: list[int], edges_px: tuple[int, ...] = WIDTH_BINS_PX) -
     return [float(min(n, next((e for e in edges_px if e > w), 1.5 * w))) for w, n in zip(widths_px, nexts)]
 
 
-def marginal_ceiling_curves(lens: torch.nn.Module, widths_px: tuple[int, ...] | list[int],
+def marginal_ceiling_curves(lens: Lens, widths_px: tuple[int, ...] | list[int],
                             frames: tuple[int, ...] = (1,), model: PlateModel = PlateModel(),
                             prior: NuisancePrior = DEFAULT_PRIOR, seed: int = 0, noise_draws: int = 2,
                             precision: Precision = Precision(),
@@ -261,7 +262,7 @@ def _curve(name: str, frames: int, n: int, widths: list[int], highs: list[float]
         width_high_px=np.asarray(highs), rule_plate=rule_position.min(1), rule_interval=rule_interval)
 
 
-def convergence(lens: torch.nn.Module, width_px: int, width_high_px: float | None = None,
+def convergence(lens: Lens, width_px: int, width_high_px: float | None = None,
                 points: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64), prior: NuisancePrior = DEFAULT_PRIOR,
                 model: PlateModel = PlateModel(), seed: int = 0, n_plates: int = 8, noise_draws: int = 2) -> dict:
     """The T = 1 plate ceiling and the fresh-nuisance rule against the number of nuisance points M at one
@@ -271,11 +272,13 @@ def convergence(lens: torch.nn.Module, width_px: int, width_high_px: float | Non
     high = 1.5 * width_px if width_high_px is None else float(width_high_px)
     fixed = Precision(min_plates=n_plates, batch=n_plates, max_plates=n_plates)
     rows = []
-    settings = [(m, dataclasses.replace(prior, points=m, exhaustive=False)) for m in points]
+    settings: list[tuple[int | str, NuisancePrior]] = [(m, dataclasses.replace(prior, points=m, exhaustive=False))
+                                                       for m in points]
     settings += [("all", prior)] if prior.exhaustive else []
     for m, setting in settings:
         t0 = time.perf_counter()
         (curve,) = marginal_ceiling_curves(lens, (width_px,), (1,), model, setting, seed, noise_draws, fixed, [high])
+        assert curve.rule_plate is not None and curve.rule_interval is not None  # a marginalised curve has both
         rows.append({"points": m, "plate_ceiling": float(curve.plate_ceiling[0]),
                      "plate_interval": curve.plate_interval[0].tolist(), "rule_plate": float(curve.rule_plate[0]),
                      "rule_interval": curve.rule_interval[0].tolist(), "char_ceiling": float(curve.char_ceiling[0]),

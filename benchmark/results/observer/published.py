@@ -189,7 +189,8 @@ def run_violations(records: Sequence[Mapping[str, Any]], lens_info: Mapping[str,
     not and why, every violation of the genie's ceiling (`violations`, ceiling "genie": the rows fail)
     and every bin above the tighter ceiling alone (`above_tighter`, ceiling "marginal": reported only),
     each with its message; `tighter_checked`: the lenses whose record holds the tighter ceiling."""
-    curves, tighter, not_checked = {}, {}, {}
+    curves, not_checked = {}, {}
+    tighter: dict[str, CeilingCurve] = {}
     for lens, info in lens_info.items():
         record = study_record(study, lens, info.get("spec"))
         if record is None:
@@ -199,8 +200,9 @@ def run_violations(records: Sequence[Mapping[str, Any]], lens_info: Mapping[str,
                                  + ", ".join(spec_differences(stored.get("lens_spec"), info.get("spec"))))
         else:
             curves[lens] = t1_curve(record)
-            if marginal_t1_curve(record) is not None:
-                tighter[lens] = marginal_t1_curve(record)
+            marginal = marginal_t1_curve(record)
+            if marginal is not None:
+                tighter[lens] = marginal
     measured = [m for m in plate_bins(records) if m.lens in curves]
     violations = check_consistency(measured, curves)
     failed = {(v.measured.lens, v.measured.reader, v.measured.low_px) for v in violations}
