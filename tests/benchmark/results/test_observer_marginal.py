@@ -250,3 +250,32 @@ def test_convergence_tabulates_a_falling_ceiling_against_the_points():
     assert [r["points"] for r in rows] == [1, 4, 16]
     assert rows[-1]["plate_ceiling"] < rows[0]["plate_ceiling"]
     assert all(r["rule_plate"] <= r["plate_ceiling"] + 1e-9 for r in rows)
+
+
+def test_the_chart_draws_the_tighter_ceiling_per_bin_and_the_bracket_to_the_ensemble():
+    """A lens panel draws the tighter ceiling as a step over each of its bins and shades, per width bin of
+    an entry's ensemble, the bracket from the ensemble's accuracy up to the tighter ceiling of that bin."""
+    from matplotlib.collections import PolyCollection
+
+    from benchmark.results.charts.ideal_observer_chart import ideal_observer_figure
+    from benchmark.results.entries import make_entry
+    from benchmark.results.schema import Units
+    tighter = _toy_curve(0.6, (0.55, 0.65), True)
+    stored = json.loads((LEADERBOARD / "studies" / "ideal_observer.json").read_text())
+    record = {**stored["lenses"]["defocus"], "marginal": {"t1": {"curve": tighter.to_dict()}}}
+    study = {**stored, "lenses": {"defocus": record}}
+    correct = [1] * 5 + [0] * 15
+    row = Row(kind="reader", lens="defocus", attack="lpdr-oracle", reader="lpdr-oracle", seed=0, profile="quick",
+              scenes="synthetic", threat_model="sensor-access", metrics={"plate_acc": 0.25, "n_plates": 20.0})
+    row.set_units(Units.from_names("plate", [f"synthetic/val/0/{i:05d}@x0y0p0#0" for i in range(20)],
+                                   {"correct": correct, "char_errors": [7 * (1 - c) for c in correct],
+                                    "width_px": [26] * 20}))
+    entry = make_entry("defocus", [row], {}, None, record["lens_spec"])
+    panel = next(ax for ax in ideal_observer_figure(study, [entry]).get_axes() if ax.get_title() == "defocus")
+    (step,) = [line for line in panel.get_lines() if line.get_linestyle() == "-." and len(line.get_xdata())]
+    assert list(step.get_xdata()) == [24.0, 36.0] and list(step.get_ydata()) == pytest.approx([60.0, 60.0])
+    bands = [c for c in panel.collections if isinstance(c, PolyCollection) and len(c.get_paths())
+             and c.get_paths()[0].vertices.size]
+    spans = [(float(v[:, 0].min()), float(v[:, 0].max()), float(v[:, 1].min()), float(v[:, 1].max()))
+             for c in bands for v in (c.get_paths()[0].vertices,)]
+    assert (24.0, 32.0, 25.0, 60.0) in [tuple(round(x, 6) for x in s) for s in spans]  # bin 24-32: 25 % to 60 %
