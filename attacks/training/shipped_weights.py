@@ -81,8 +81,11 @@ def data_summary(*tensors: Tensor) -> list[float]:
 
 def same_data(a: Any, b: Any) -> bool:
     """Whether two ``data`` fields of a key name the same training data: equal sha256 or equal text, or
-    ``summary`` lists of one length that agree within ``SUMMARY_ATOL``."""
-    if not (isinstance(a, Mapping) and isinstance(b, Mapping)):
+    ``summary`` lists of one length that agree within ``SUMMARY_ATOL``. A field that describes its data
+    instead (no sha256, no summary: e.g. which scenes of which split) must be equal as text."""
+    fingerprinted = isinstance(a, Mapping) and isinstance(b, Mapping) and any(
+        k in d for d in (a, b) for k in ("sha256", "summary"))
+    if not fingerprinted:
         return key_text({"d": a}) == key_text({"d": b})
     if a.get("sha256") is not None and a.get("sha256") == b.get("sha256"):
         return True

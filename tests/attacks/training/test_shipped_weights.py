@@ -128,3 +128,10 @@ def test_the_packages_own_weights_are_found_where_the_package_ships_them():
         prov = json.loads(path.read_text())
         found = find_shipped(prov["kind"], prov["key"])
         assert found is not None and found.path == path.with_suffix(".safetensors"), path.name
+
+
+def test_a_described_data_field_matches_only_its_equal():
+    described = {"scenes": "synthetic", "split": "train", "n": 64}
+    assert same_data(described, dict(described))
+    assert not same_data(described, {**described, "n": 65})
+    assert not same_data(described, {"sha256": "abc", "summary": [0.1]})
