@@ -22,10 +22,14 @@ Flags (``Flag.kind``):
 - ``fit-still-rising``: a learned attacker's row carries the note ``fit_still_rising`` = "true"
   (``schema.FIT_STILL_RISING``): its fit stopped while held-out accuracy was still improving, so it
   is a lower bound on what that attacker reaches.
-- ``untrained-beats-trained``: an attacker that does not learn the lens (threat model sensor-access)
-  beats, by a paired test at the 5 % level, one of its family that does (same name before the first
-  "-", e.g. nafnet-generic and nafnet-known-pairs; a chain's family is its restorer's with the same
-  reader): the trained one is under-fitted.
+- ``untrained-beats-trained``: an attacker that learns nothing beats, by a paired test at the 5 % level,
+  one that learns: the learning one is under-fitted. Rows that carry the note ``learns``
+  (``Attack.learns``) are compared across families: every learning restorer with every restorer that
+  learns nothing of an equal or weaker threat model (e.g. wiener-known-psf against nafnet-known-psf,
+  demosaic-vng against every learning one), and chains likewise when they share their reader. Rows
+  without the note (entries measured before it) keep the older rule: sensor-access attackers count as
+  not learning the lens, compared only within their family (same name before the first "-", e.g.
+  nafnet-generic and nafnet-known-pairs; a chain's family is its restorer's with the same reader).
 - ``attack-gap``: a gap over ``GAP_ALARM`` (30 points) in a bin where the ceiling (the tighter one where
   the study holds it) exceeds ``CEILING_ALARM`` (50 %): the suite's attackers are weak here, privacy is
   overstated.
@@ -46,7 +50,7 @@ from benchmark.results.entries import Entry
 from benchmark.results.observer.ceiling import CeilingCurve
 from benchmark.results.observer.consistency import BinAccuracy, check_consistency
 from benchmark.results.observer.published import marginal_t1_curve, study_record, t1_curve
-from benchmark.results.schema import FIT_STILL_RISING, Row, threat_models
+from benchmark.results.schema import FIT_STILL_RISING, LEARNS, Row, threat_models
 
 __all__ = ["CEILING_ALARM", "FLAG_KINDS", "GAP_ALARM", "GAP_WIDTHS_PX", "Flag", "Gap", "attack_gaps", "entry_flags",
            "entry_gaps", "gap_curves", "lens_flags"]
@@ -203,27 +207,45 @@ def _row_accuracies(lens: str, rows: Sequence[Row]) -> list[BinAccuracy]:
             for attack, (hits, n) in counts.items() if n]
 
 
+def _learns(row: Row, threats: Mapping[str, str | None]) -> bool | None:
+    """Whether the row's attacker learns: its ``learns`` note, else (older rows) not sensor-access; None
+    for a reference row or one without a threat model."""
+    if row.kind == "reference" or threats.get(row.attack) is None:
+        return None
+    note = row.notes.get(LEARNS)
+    if note is not None:
+        return note.strip().lower() in _TRUE
+    return threats[row.attack] != UNTRAINED
+
+
+def _comparable(weak: Row, strong: Row, threats: Mapping[str, str | None]) -> bool:
+    """Whether a non-learning ``weak`` row is held against the learning ``strong`` one (module docs)."""
+    reader = (weak.reader if weak.kind == "chain" else None) == (strong.reader if strong.kind == "chain" else None)
+    if LEARNS in weak.notes and LEARNS in strong.notes:
+        from attacks import ThreatModel  # lazy: reading rows needs no torch
+
+        order = [t.value for t in ThreatModel]
+        return reader and order.index(threats[weak.attack]) <= order.index(threats[strong.attack])
+    return reader and _family(weak.restorer or weak.attack) == _family(strong.restorer or strong.attack)
+
+
 def _stronger_untrained(rows: Sequence[Row]) -> list[str]:
-    """Messages for every (untrained, trained) pair of one family where the untrained one is better
-    by a paired test at the 5 % level: restorers by per-scene PSNR (stratified paired bootstrap),
-    readers and chains by per-plate reads (McNemar)."""
+    """Messages for every (non-learning, learning) pair held against each other (module docs) where the
+    non-learning one is better by a paired test at the 5 % level: restorers by per-scene PSNR (stratified
+    paired bootstrap), readers and chains by per-plate reads (McNemar)."""
     threats = threat_models(rows)
     ok = [r for r in rows if r.ok and r.units is not None]
     messages = []
-
-    def key(row: Row) -> tuple[str, str | None]:
-        return (_family(row.restorer or row.attack), row.reader if row.kind == "chain" else None)
-
     for kind, unit, value in (("restorer", "scene", "psnr_db"), ("plates", "plate", "correct")):
         kinds = ("restorer",) if kind == "restorer" else ("reader", "chain")
         attacks = list(dict.fromkeys(r.attack for r in ok if r.kind in kinds and r.units.unit == unit  # type: ignore[union-attr]
                                      and value in r.units.values))  # type: ignore[union-attr]
         first = {a: next(r for r in ok if r.attack == a) for a in attacks}
         for weak in attacks:
-            if threats.get(weak) != UNTRAINED:
+            if _learns(first[weak], threats) is not False:
                 continue
             for strong in attacks:
-                if strong == weak or threats.get(strong) in (None, UNTRAINED) or key(first[weak]) != key(first[strong]):
+                if strong == weak or not _learns(first[strong], threats) or not _comparable(first[weak], first[strong], threats):
                     continue
                 comparison = (_restorer_comparison(ok, weak, strong) if kind == "restorer"
                               else _reader_comparison(ok, weak, strong))
@@ -234,7 +256,7 @@ def _stronger_untrained(rows: Sequence[Row]) -> list[str]:
                     what = "PSNR dB" if kind == "restorer" else "plate accuracy"
                     scale, unit_text = (1.0, " dB") if kind == "restorer" else (100.0, " pt")
                     messages.append(
-                        f"{weak} (does not learn the lens) beats {strong} ({threats[strong]}) on {what} by "
+                        f"{weak} ({threats[weak]}, learns nothing) beats {strong} ({threats[strong]}, learns) on {what} by "
                         f"{scale * comparison.difference:+.2f}{unit_text} [{scale * comparison.low:+.2f}, "
                         f"{scale * comparison.high:+.2f}] ({decided.text.split(': ', 1)[1]}): {strong} is under-fitted")
     return messages

@@ -17,7 +17,7 @@ from benchmark.results.ensemble import (chain_accuracy, plate_ensemble, pooled_m
 from benchmark.results.plate_scoring import LEGACY_READABLE_MIN_WIDTH_PX, READABLE_MIN_WIDTH_PX
 from benchmark.results.entries import make_entry
 from benchmark.results.observer.ceiling import CeilingCurve
-from benchmark.results.schema import FIT_STILL_RISING, Row, Units
+from benchmark.results.schema import FIT_STILL_RISING, LEARNS, Row, Units
 
 PROFILE = "quick"
 ROOT = Path(__file__).resolve().parents[3]
@@ -197,6 +197,28 @@ def test_flags_stay_quiet_on_a_clean_case():
     other = json.loads(json.dumps(spec))
     other["optics"]["focus_distance_m"] = 3.0
     assert lens_flags("defocus", PROFILE, [_reader("lpdr-oracle", 0, _hits(5), lens="defocus")], other, study) == []
+
+
+def test_rows_that_say_whether_they_learn_are_held_against_each_other_across_families():
+    # A learning lens-access restorer below Wiener (same threat model, another family) is under-fitted; a
+    # known-pairs learner below Richardson-Lucy (lens access: a stronger threat model) is not compared.
+    scenes = np.linspace(20, 30, 32)
+    rows = [_restorer("wiener-known-psf", 0, scenes + 1.0, lens="defocus", threat="lens-access"),
+            _restorer("richardson-lucy-known-psf", 0, scenes + 3.0, lens="defocus", threat="lens-access"),
+            _restorer("nafnet-known-psf", 0, scenes, lens="defocus", threat="lens-access"),
+            _restorer("nafnet-known-pairs", 0, scenes + 2.0, lens="defocus", threat="known-pairs")]
+    for row, learns in zip(rows, ("false", "false", "true", "true")):
+        row.notes[LEARNS] = learns
+    messages = [f.message for f in lens_flags("defocus", PROFILE, rows, None, None) if f.kind == "untrained-beats-trained"]
+    assert len(messages) == 2 and all(m.endswith("nafnet-known-psf is under-fitted") for m in messages)
+    assert {m.split(" ")[0] for m in messages} == {"wiener-known-psf", "richardson-lucy-known-psf"}
+    # The learner fixed (above both): no flag. Without the notes, the older same-family rule sees none.
+    rows[2] = _restorer("nafnet-known-psf", 0, scenes + 4.0, lens="defocus", threat="lens-access")
+    rows[2].notes[LEARNS] = "true"
+    assert not [f for f in lens_flags("defocus", PROFILE, rows, None, None) if f.kind == "untrained-beats-trained"]
+    legacy = [_restorer("wiener-known-psf", 0, scenes + 1.0, lens="defocus", threat="lens-access"),
+              _restorer("nafnet-known-psf", 0, scenes, lens="defocus", threat="lens-access")]
+    assert not [f for f in lens_flags("defocus", PROFILE, legacy, None, None) if f.kind == "untrained-beats-trained"]
 
 
 def test_a_malformed_fit_note_names_the_row():
