@@ -113,6 +113,11 @@ class NafnetKnownPairs(Restorer):
     def _fit_known_psf(self, ctx: FitContext, budget: RestorerBudget, sensor: Tensor, sharp: Tensor) -> FitReport:
         from attacks.restorers.nafnet_known_psf import NafnetKnownPSF, pack, unpack
 
+        def ready(net: NAFNet) -> FitReport:
+            self.network = net
+            self.engine = InferenceEngine(fold_for_inference(net), self.backend, fallback=True)
+            return self._report()
+
         if sensor.shape[0] < 2:
             raise ValueError(f"{self.name}: the known-psf start needs at least 2 TRAIN pairs (some held out), "
                              f"got {sensor.shape[0]}")
@@ -128,9 +133,9 @@ class NafnetKnownPairs(Restorer):
         if stored is not None:
             assert start.budget is not None  # set by load_pretrained
             try:
-                self.network, self.curve = unpack(stored, start.budget)
+                net, self.curve = unpack(stored, start.budget)
                 self.trained = False
-                return self._report()
+                return ready(net)
             except (SafetensorError, RuntimeError, KeyError, ValueError) as exc:
                 log.warning("%s: cached weights unreadable (%s); fine-tuning again", self.name, exc)
         inputs = psf_inputs(sensor, self._otf, gain)
@@ -140,10 +145,10 @@ class NafnetKnownPairs(Restorer):
         self.curve = fine_tune(net, inputs[:-held], sharp[:-held], inputs[-held:][centre], sharp[-held:][centre],
                                max_steps=budget.steps, crop_px=budget.crop_px, batch_size=budget.batch_size,
                                seed=ctx.seed, device=ctx.device)
-        self.network, self.trained = net, True
+        self.trained = True
         if ctx.artifacts is not None:
             ctx.artifacts.save(self.name, key, pack(net, self.curve))
-        return self._report()
+        return ready(net)
 
     def _report(self) -> FitReport:
         assert self.curve is not None
@@ -165,11 +170,11 @@ class NafnetKnownPairs(Restorer):
     def restore(self, sensor: Tensor) -> Tensor:
         """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""
         if self.start == "known-psf":
-            if self.network is None or self._otf is None or self._gain is None:
+            from attacks.restorers.nafnet_known_psf import restore_known_psf
+
+            if self.engine is None or self._otf is None or self._gain is None:
                 raise RuntimeError(f"{self.name}: call fit(ctx) before restore()")
-            with torch.no_grad():
-                return torch.cat([self.network(psf_inputs(sensor[i:i + 1].cpu(), self._otf, self._gain)).clamp(0.0, 1.0)
-                                  for i in range(sensor.shape[0])]).to(sensor.device)
+            return restore_known_psf(self.engine, sensor, self._otf, self._gain)
         if self.engine is None:
             raise RuntimeError(f"{self.name}: call fit(ctx) before restore()")
         return self.engine(sensor).clamp(0.0, 1.0)

@@ -29,7 +29,9 @@ from torch import Tensor
 
 from attacks.backends.real_fft import OtfCache
 from attacks.base import FitContext, FitReport, Restorer, ThreatModel
+from attacks.backends.onnx_runtime import InferenceEngine, check_backend
 from attacks.networks.nafnet import NAFNet
+from attacks.networks.nafnet_folded import fold_for_inference
 from attacks.training.lens_family import LensFamily
 from attacks.training.psf_restorer_training import (
     PretrainCurve,
@@ -42,7 +44,7 @@ from attacks.training.psf_restorer_training import (
 from attacks.training.restorer_training import collect_pairs, data_identity
 from attacks.training.shipped_weights import Shipped, find_shipped
 
-__all__ = ["SHIPPED_SCENES", "NafnetKnownPSF", "pack", "shipped_key", "unpack"]
+__all__ = ["SHIPPED_SCENES", "NafnetKnownPSF", "pack", "restore_known_psf", "shipped_key", "unpack"]
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +77,13 @@ def unpack(data: bytes, budget: PsfPretrainBudget) -> tuple[NAFNet, PretrainCurv
     return net.eval(), curve
 
 
+def restore_known_psf(engine: InferenceEngine, sensor: Tensor, otf: OtfCache, gain: Tensor) -> Tensor:
+    """Scene estimates (B, 3, H, W) in [0, 1] of sensor images: the Wiener stage, then the network, one
+    image at a time (the six-channel input of a whole batch of frames would be large)."""
+    return torch.cat([engine(psf_inputs(sensor[i:i + 1].cpu(), otf, gain)).clamp(0.0, 1.0)
+                      for i in range(sensor.shape[0])]).to(sensor.device)
+
+
 def _metadata(data: bytes) -> dict[str, str]:
     """The ``__metadata__`` of safetensors bytes (its header: an 8-byte length, then JSON)."""
     n = struct.unpack("<Q", data[:8])[0]
@@ -87,6 +96,8 @@ class NafnetKnownPSF(Restorer):
     Args:
         use_shipped: Load the package's pre-training when its key matches (default); False pre-trains
             (or loads from the run's cache).
+        backend: Inference backend of the network, "onnx" (default: the folded network through ONNX
+            Runtime, torch where it is not on the CPU), "auto" or "torch" (``attacks.backends.onnx_runtime``).
 
     Attributes:
         shipped: After ``fit``: the shipped weights used, or None.
@@ -99,8 +110,10 @@ class NafnetKnownPSF(Restorer):
     learns: ClassVar[bool] = True
     requires: ClassVar[frozenset[str]] = frozenset({"lens"})
 
-    def __init__(self, use_shipped: bool = True) -> None:
+    def __init__(self, use_shipped: bool = True, backend: str = "onnx") -> None:
         self.use_shipped = use_shipped
+        self.backend = check_backend(backend)
+        self.engine: InferenceEngine | None = None
         self.shipped: Shipped | None = None
         self.curve: PretrainCurve | None = None
         self.trained: bool | None = None
@@ -116,6 +129,7 @@ class NafnetKnownPSF(Restorer):
         self._gain = ctx.lens.gain().detach().cpu()
         self.network, self.curve, self.trained = self.load_pretrained(ctx)
         self.network = self.network.to(ctx.device).eval()
+        self.engine = InferenceEngine(fold_for_inference(self.network), self.backend, fallback=True)
         if self.curve is None:
             return FitReport()
         return FitReport(curve=self.curve.to_fit_curve(), still_rising=self.curve.still_rising,
@@ -156,19 +170,14 @@ class NafnetKnownPSF(Restorer):
 
     def restore(self, sensor: Tensor) -> Tensor:
         """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""
-        if self.network is None or self._otf is None or self._gain is None:
+        if self.engine is None or self._otf is None or self._gain is None:
             raise RuntimeError(f"{self.name}: call fit(ctx) before restore()")
-        device = next(self.network.parameters()).device
-        out = []
-        with torch.no_grad():
-            for i in range(sensor.shape[0]):
-                x = psf_inputs(sensor[i:i + 1].cpu(), self._otf, self._gain)
-                out.append(self.network(x.to(device)).clamp(0.0, 1.0).to(sensor.device))
-        return torch.cat(out)
+        return restore_known_psf(self.engine, sensor, self._otf, self._gain)
 
     def describe(self) -> dict[str, Any]:
         """Configuration: budget, the pre-training's provenance and held-out score."""
-        described = {**super().describe(), "budget": None if self.budget is None else self.budget.to_dict(),
+        described = {**super().describe(), "backend": self.backend,
+                     "budget": None if self.budget is None else self.budget.to_dict(),
                      "input": "wiener(psf, gain, bayer noise) + white-balanced sensor", "per_lens_training": False}
         if self.shipped is not None:
             described["shipped_weights"] = self.shipped.describe()

@@ -118,3 +118,16 @@ def test_the_wiener_stage_is_the_wiener_attackers_estimate():
     assert torch.allclose(x[:, :3], wiener.restore(sensor), atol=1e-6)
     reference = wiener_deconvolve(sensor, OtfCache(lens.psf()), sigma=bayer_noise_sigma(sensor))
     assert torch.allclose(x[:, :3], (reference / lens.gain().view(1, 3, 1, 1)).clamp(0, 1), atol=1e-6)
+
+
+def test_the_folded_onnx_network_restores_as_the_trained_one(shipped_restorer):
+    net, _, _ = shipped_restorer
+    lens = Lens(load_spec(SPEC_DIR / "defocus.toml"))
+    attacker = attacks.load("nafnet-known-psf")
+    attacker.fit(FitContext(lens=lens, budget=QUICK))
+    assert attacker.engine is not None and attacker.engine.backend == "onnx"
+    sharp = to_tensor(load_scenes("synthetic", "test", 2, (96, 160), 4))
+    with torch.no_grad():
+        sensor = lens(sharp, generator=torch.Generator().manual_seed(1))
+        direct = net(psf_inputs(sensor, OtfCache(lens.psf()), lens.gain())).clamp(0, 1)
+    assert torch.allclose(attacker.restore(sensor), direct, atol=1e-4)
