@@ -9,7 +9,7 @@ import torch
 
 import attacks
 from benchmark import api
-from benchmark.runner.defaults import PROPOSED_ENSEMBLE, STANDARD_ENSEMBLE
+from benchmark.runner.defaults import MEASURED_ADDITIONS, PROPOSED_ENSEMBLE, STANDARD_ENSEMBLE
 from benchmark.runner import runner
 from benchmark.runner.config import RunConfig
 from benchmark.runner.evaluation import Attacked, PlateSet, ReadyReader, Target, read_sensor, run_restorers
@@ -69,8 +69,8 @@ def test_only_the_chains_of_the_ensemble_are_read_and_their_restorers_windows_re
     assert sorted(everything) == sorted(["read", "unread", "blind", "read>blind", "unread>blind"])
 
 
-def test_the_standard_ensemble_is_the_proposal_with_the_learned_reader_and_the_raw_reference():
-    assert set(STANDARD_ENSEMBLE) == set(PROPOSED_ENSEMBLE) | {"learned-reader", "raw"}
+def test_the_standard_ensemble_is_the_proposal_with_the_measured_additions_the_learned_reader_and_raw():
+    assert set(STANDARD_ENSEMBLE) == set(PROPOSED_ENSEMBLE) | set(MEASURED_ADDITIONS) | {"learned-reader", "raw"}
     assert len(STANDARD_ENSEMBLE) == len(set(STANDARD_ENSEMBLE)) and STANDARD_ENSEMBLE[-2:] == ("learned-reader", "raw")
     named = runner.standard_attackers()
     assert len(named) == len(set(named)) and set(named) == {p for c in STANDARD_ENSEMBLE for p in c.split(">")}
@@ -98,3 +98,18 @@ def test_default_attackers_are_the_standard_ensemble_and_named_ones_are_exactly_
         RunConfig(**{**cfg.__dict__, "chains": None}), selection.restorers, selection.readers)
     with pytest.raises(TypeError, match="all_chains"):
         api._configure(["ideal"], None, "smoke", [0], "synthetic", "cpu", "local", None, 30, None, all_chains="yes")
+
+
+def test_each_measured_addition_beat_every_published_restorer_on_the_study_s_lenses():
+    import json
+    from pathlib import Path
+
+    study = json.loads((Path(__file__).resolve().parents[3] / "leaderboard" / "studies" / "known_psf_restorers.json")
+                       .read_text())
+    for addition in (c for c in MEASURED_ADDITIONS if ">" not in c):
+        records = [lens["restorers"][addition] for lens in study["lenses"].values() if addition in lens["restorers"]]
+        assert records, f"{addition}: no lens of the study measured it"
+        for record in records:
+            assert record["versus_published_ensemble"]["verdict"] == "holds"
+            assert all(c["verdict"] == "holds" for c in record["versus_published"].values()
+                       if c["difference_db"] != 0.0)
