@@ -7,8 +7,8 @@ EU band, surround) stays as `PlateModel` tells it. The PSF is shift-invariant, s
 modulo the RGGB period (2 px) changes what the sensor records: a corner uniform over [0, 2) px in
 each axis is the sub-pixel position and the Bayer parity together.
 
-Rendering. Where the position and width fall on the pixel grid (`pixel-grid` or `known` for both)
-the plate is drawn by the scenes' own `render_plate` at its integer size and pasted at its integer
+Rendering. Where the position and width fall on the pixel grid (`pixel-grid` or `known` for both,
+one position per pixel, no `area_rendering`) the plate is drawn by the scenes' own `render_plate` at its integer size and pasted at its integer
 offset, exactly as the synthetic scenes paste it (so a prior collapsed to the genie's point gives the
 genie's means bit for bit). Otherwise the plate is drawn once per text at a fine `master` size
 (`render_plate` at >= MASTER_HEIGHT_PX rows) and integrated over each sensor pixel's footprint at the
@@ -95,12 +95,6 @@ class NuisancePrior:
         """True when every point lies on the pixel grid (integer corner and width)."""
         return (self.position != "continuous" and self.width != "continuous" and self.position_steps == 1
                 and not self.area_rendering)
-
-    def unknown(self) -> tuple[str, ...]:
-        """The names of the nuisances this prior marginalises."""
-        found = [f"position ({self.position})"] if self.position != "known" else []
-        found += [f"width ({self.width})"] if self.width != "known" else []
-        return tuple(found + (["exposure"] if self.exposure[0] < self.exposure[1] else []))
 
 
 @dataclass(frozen=True)
