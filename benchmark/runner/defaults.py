@@ -4,7 +4,8 @@
 published quick entries (docs/ensemble.md, written by ``python -m benchmark.studies.ensemble_choice_study``;
 tests/benchmark/results/test_ensemble_choice.py recomputes it, so it cannot drift from the entries).
 ``MEASURED_ADDITIONS`` are attackers newer than those entries, added on measurement until the next
-choice re-runs the rule on entries that hold them. ``STANDARD_ENSEMBLE`` is what a run measures unless told otherwise (``benchmark.runner.runner.standard_attackers``).
+choice re-runs the rule on entries that hold them. ``STANDARD_ENSEMBLE`` is what a run measures unless
+told otherwise (``benchmark.runner.runner.standard_attackers``).
 """
 
 from __future__ import annotations
