@@ -18,7 +18,6 @@ the package ships the scratch fit for the lens it ships (``benchmark.codesign.sh
 
 from __future__ import annotations
 
-import logging
 from typing import Any, ClassVar
 
 import torch
@@ -32,6 +31,7 @@ from attacks.training.restorer_training import (
     RestorerBudget,
     collect_pairs,
     data_identity,
+    fingerprint,
     lens_key,
     random_crops,
     shipped_or_fit,
@@ -39,13 +39,10 @@ from attacks.training.restorer_training import (
 from attacks.training.shipped_weights import Shipped
 from attacks.backends.real_fft import OtfCache
 from attacks.training.pair_psf import estimate_psf
-from attacks.training.psf_restorer_training import PretrainCurve, fine_tune, psf_inputs
-from attacks.training.restorer_training import fingerprint
-from safetensors import SafetensorError
+from attacks.restorers.nafnet_known_psf import NafnetKnownPSF, load_cached, pack, restore_known_psf
+from attacks.training.psf_restorer_training import PretrainCurve, centre, fine_tune, psf_inputs
 
 __all__ = ["ESTIMATED_PSF_PX", "STARTS", "NafnetKnownPairs", "NafnetKnownPairsTuned"]
-
-log = logging.getLogger(__name__)
 
 STARTS = ("known-psf", "scratch")
 ESTIMATED_PSF_PX = 95
@@ -111,8 +108,6 @@ class NafnetKnownPairs(Restorer):
         return FitReport()
 
     def _fit_known_psf(self, ctx: FitContext, budget: RestorerBudget, sensor: Tensor, sharp: Tensor) -> FitReport:
-        from attacks.restorers.nafnet_known_psf import NafnetKnownPSF, pack, unpack
-
         def ready(net: NAFNet) -> FitReport:
             self.network = net
             self.engine = InferenceEngine(fold_for_inference(net), self.backend, fallback=True)
@@ -129,20 +124,15 @@ class NafnetKnownPairs(Restorer):
         self.shipped = start.shipped
         key = {**self._key(budget, ctx, sensor, sharp), "start": self.start,
                "pretrained": fingerprint(*(v for _, v in sorted(net.state_dict().items())))}
-        stored = None if ctx.artifacts is None else ctx.artifacts.load(self.name, key)
-        if stored is not None:
-            assert start.budget is not None  # set by load_pretrained
-            try:
-                net, self.curve = unpack(stored, start.budget)
-                self.trained = False
-                return ready(net)
-            except (SafetensorError, RuntimeError, KeyError, ValueError) as exc:
-                log.warning("%s: cached weights unreadable (%s); fine-tuning again", self.name, exc)
+        assert start.budget is not None  # set by load_pretrained
+        cached = load_cached(ctx.artifacts, self.name, key, start.budget)
+        if cached is not None:
+            self.trained = False
+            net, self.curve = cached
+            return ready(net)
         inputs = psf_inputs(sensor, self._otf, gain)
         held = max(1, sensor.shape[0] // 8)
-        h, w = inputs.shape[-2:]
-        centre = (slice(None), slice(None), slice(h // 4, h // 4 + h // 2), slice(w // 4, w // 4 + w // 2))
-        self.curve = fine_tune(net, inputs[:-held], sharp[:-held], inputs[-held:][centre], sharp[-held:][centre],
+        self.curve = fine_tune(net, inputs[:-held], sharp[:-held], centre(inputs[-held:]), centre(sharp[-held:]),
                                max_steps=budget.steps, crop_px=budget.crop_px, batch_size=budget.batch_size,
                                seed=ctx.seed, device=ctx.device)
         self.trained = True
@@ -170,8 +160,6 @@ class NafnetKnownPairs(Restorer):
     def restore(self, sensor: Tensor) -> Tensor:
         """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""
         if self.start == "known-psf":
-            from attacks.restorers.nafnet_known_psf import restore_known_psf
-
             if self.engine is None or self._otf is None or self._gain is None:
                 raise RuntimeError(f"{self.name}: call fit(ctx) before restore()")
             return restore_known_psf(self.engine, sensor, self._otf, self._gain)

@@ -28,7 +28,7 @@ from safetensors.torch import save as save_safetensors
 from torch import Tensor
 
 from attacks.backends.real_fft import OtfCache
-from attacks.base import FitContext, FitReport, Restorer, ThreatModel
+from attacks.base import ArtifactStore, FitContext, FitReport, Restorer, ThreatModel
 from attacks.backends.onnx_runtime import InferenceEngine, check_backend
 from attacks.networks.nafnet import NAFNet
 from attacks.networks.nafnet_folded import fold_for_inference
@@ -44,7 +44,7 @@ from attacks.training.psf_restorer_training import (
 from attacks.training.restorer_training import collect_pairs, data_identity
 from attacks.training.shipped_weights import Shipped, find_shipped
 
-__all__ = ["SHIPPED_SCENES", "NafnetKnownPSF", "pack", "restore_known_psf", "shipped_key", "unpack"]
+__all__ = ["SHIPPED_SCENES", "NafnetKnownPSF", "load_cached", "pack", "restore_known_psf", "shipped_key", "unpack"]
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +75,20 @@ def unpack(data: bytes, budget: PsfPretrainBudget) -> tuple[NAFNet, PretrainCurv
     metadata = _metadata(data)
     curve = PretrainCurve.from_dict(json.loads(metadata["curve"])) if "curve" in metadata else None
     return net.eval(), curve
+
+
+def load_cached(artifacts: ArtifactStore | None, kind: str, key: dict[str, Any], budget: PsfPretrainBudget
+                ) -> tuple[NAFNet, PretrainCurve | None] | None:
+    """The network and curve ``pack`` stored in the artifact store under (kind, key); None when there are
+    none, or when the stored bytes do not unpack (logged: the caller trains again and overwrites them)."""
+    stored = None if artifacts is None else artifacts.load(kind, key)
+    if stored is None:
+        return None
+    try:
+        return unpack(stored, budget)
+    except (SafetensorError, RuntimeError, KeyError, ValueError) as exc:
+        log.warning("%s: cached weights unreadable (%s); training again", kind, exc)
+        return None
 
 
 def restore_known_psf(engine: InferenceEngine, sensor: Tensor, otf: OtfCache, gain: Tensor) -> Tensor:
@@ -153,13 +167,9 @@ class NafnetKnownPSF(Restorer):
         if sharp.shape[0] < 2:
             raise ValueError(f"{self.name}: pre-training needs at least 2 TRAIN scenes (one held out), got {sharp.shape[0]}")
         key = shipped_key(budget, data_identity(sharp))
-        stored = None if ctx.artifacts is None else ctx.artifacts.load(self.name, key)
-        if stored is not None:
-            try:
-                net, curve = unpack(stored, budget)
-                return net, curve, False
-            except (SafetensorError, RuntimeError, KeyError, ValueError) as exc:
-                log.warning("%s: cached weights unreadable (%s); pre-training again", self.name, exc)
+        cached = load_cached(ctx.artifacts, self.name, key, budget)
+        if cached is not None:
+            return cached[0], cached[1], False
         log.warning("%s: no shipped pre-training for the %s budget; pre-training on this run's %d TRAIN scenes",
                     self.name, "small" if budget.max_steps < 100 else "full", sharp.shape[0])
         held = max(1, sharp.shape[0] // 4)

@@ -51,7 +51,7 @@ from attacks.training.restorer_training import negative_psnr
 log = logging.getLogger(__name__)
 
 __all__ = ["FINE_TUNE_FIRST_EVAL", "FINE_TUNE_LR", "PSF_BUDGETS", "PretrainCurve", "PsfPretrainBudget", "build_network",
-           "fine_tune", "pretrain", "psf_budget", "psf_inputs"]
+           "centre", "fine_tune", "pretrain", "psf_budget", "psf_inputs"]
 
 HELDOUT_SEED_OFFSET = 1_000_003  # the held-out lenses' stream (seed, this, i); training draws are (seed, index)
 _LR, _LR_MIN, _BETAS, _WEIGHT_DECAY, _GRAD_CLIP = 1e-3, 1e-7, (0.9, 0.9), 1e-3, 1.0
@@ -198,9 +198,33 @@ def _psnr(x: Tensor, y: Tensor) -> Tensor:
     return -10.0 * torch.log10((x.clamp(0, 1) - y).pow(2).flatten(1).mean(1).clamp_min(1e-10))
 
 
-def _centre(x: Tensor) -> Tensor:
+def centre(x: Tensor) -> Tensor:
+    """The central half of images (..., H, W) in both axes: the held-out region, away from the borders."""
     h, w = x.shape[-2:]
     return x[..., h // 4: h // 4 + h // 2, w // 4: w // 4 + w // 2]
+
+
+def _train_step(model: NAFNet, optimizer: torch.optim.Optimizer, schedule: torch.optim.lr_scheduler.LRScheduler,
+                pool: list[tuple[Tensor, Tensor]], batch_size: int, crop_px: int, g: torch.Generator,
+                device: str) -> float:
+    """One optimiser step on crops of the pool (channels-last input, the recipe's clip); returns the loss."""
+    inp, target = _crops(pool, batch_size, crop_px, g)
+    loss = negative_psnr(model(inp.to(device, memory_format=torch.channels_last)), target.to(device))
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    nn.utils.clip_grad_norm_(model.parameters(), _GRAD_CLIP)
+    optimizer.step()
+    schedule.step()
+    return loss.item()
+
+
+def _heldout_psnr(model: NAFNet, pairs: list[tuple[Tensor, Tensor]], device: str) -> float:
+    """Mean PSNR (dB) over every image of the (input, target) batches; the model is back in train mode after."""
+    model.eval()
+    with torch.no_grad():
+        scores = [_psnr(model(x.to(device)).cpu(), y) for x, y in pairs]
+    model.train()
+    return float(torch.cat(scores).mean())
 
 
 def _flattened(scores: list[float], patience: int, min_gain: float) -> tuple[bool, bool]:
@@ -248,17 +272,11 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
 
     # Held-out set: fixed lenses of another seed stream, each on every held-out scene.
     heldout_draws = [family.draw(_generator(seed, HELDOUT_SEED_OFFSET, i)) for i in range(budget.heldout_lenses)]
-    heldout = [(_centre(_render(family, d, heldout_scenes, 10_000 * (i + 1))), _centre(heldout_scenes))
+    heldout = [(centre(_render(family, d, heldout_scenes, 10_000 * (i + 1))), centre(heldout_scenes))
                for i, d in enumerate(heldout_draws)]
     curve.heldout = [d.describe() for d in heldout_draws]
     curve.wiener_psnr_db = float(torch.cat([_psnr(x[:, :3], y) for x, y in heldout]).mean())
 
-    def evaluate() -> float:
-        model.eval()
-        with torch.no_grad():
-            scores = [_psnr(model(x.to(device)).cpu(), y) for x, y in heldout]
-        model.train()
-        return float(torch.cat(scores).mean())
 
     def refresh(index: int) -> tuple[Tensor, Tensor]:
         g = _generator(seed, index, 0)
@@ -278,16 +296,11 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
     for step in bar:
         if step != start and step % budget.refresh_every == 0:
             pool = pool[1:] + [refresh(step // budget.refresh_every + budget.pool_lenses - 1)]
-        inp, target = _crops(pool, budget.batch_size, budget.crop_px, _generator(seed, step, 1))
-        loss = negative_psnr(model(inp.to(device, memory_format=torch.channels_last)), target.to(device))
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        nn.utils.clip_grad_norm_(model.parameters(), _GRAD_CLIP)
-        optimizer.step()
-        schedule.step()
-        bar.set_postfix(psnr_db=f"{-loss.item():.2f}")
+        loss = _train_step(model, optimizer, schedule, pool, budget.batch_size, budget.crop_px,
+                           _generator(seed, step, 1), device)
+        bar.set_postfix(psnr_db=f"{-loss:.2f}")
         if (step + 1) % budget.eval_every == 0 or step + 1 == budget.max_steps:
-            score = evaluate()
+            score = _heldout_psnr(model, heldout, device)
             curve.steps.append(step + 1)
             curve.heldout_psnr_db.append(score)
             if score >= max(curve.heldout_psnr_db):
@@ -347,29 +360,20 @@ def fine_tune(model: NAFNet, inputs: Tensor, targets: Tensor, heldout_inputs: Te
     best: dict[str, Tensor] = {}
 
     def evaluate(step: int) -> None:
-        model.eval()
-        with torch.no_grad():
-            score = float(torch.cat([_psnr(model(heldout_inputs[i:i + 1].to(device)).cpu(), heldout_targets[i:i + 1])
-                                     for i in range(heldout_inputs.shape[0])]).mean())
+        score = _heldout_psnr(model, [(heldout_inputs[i:i + 1], heldout_targets[i:i + 1])
+                                      for i in range(heldout_inputs.shape[0])], device)
         curve.steps.append(step)
         curve.heldout_psnr_db.append(score)
         if score >= max(curve.heldout_psnr_db):
             nonlocal best
             best = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
-        model.train()
 
     evaluate(0)
     next_eval = min(FINE_TUNE_FIRST_EVAL, max_steps)
     pool = [(inputs, targets)]
     model.to(memory_format=torch.channels_last).train()
     for step in range(max_steps):
-        inp, target = _crops(pool, batch_size, crop_px, _generator(seed, step, 2))
-        loss = negative_psnr(model(inp.to(device, memory_format=torch.channels_last)), target.to(device))
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        nn.utils.clip_grad_norm_(model.parameters(), _GRAD_CLIP)
-        optimizer.step()
-        schedule.step()
+        _train_step(model, optimizer, schedule, pool, batch_size, crop_px, _generator(seed, step, 2), device)
         if step + 1 == next_eval:
             evaluate(step + 1)
             gain = curve.heldout_psnr_db[-1] - curve.heldout_psnr_db[-2]
