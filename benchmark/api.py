@@ -33,12 +33,12 @@ from typing import TYPE_CHECKING, Any
 import attacks
 import lenses
 from benchmark.runner import attacker_objects, executors, runner, task_costs
-from benchmark.store.cache import cache_root
+from benchmark.store.cache import cache_root, config_hash
 from benchmark.runner.diagnostics.known_warnings import silence_known_warnings
 from benchmark.runner.planning import AttackerRef, Task, plan as plan_tasks, run_directory
 from benchmark.store.profiles import Profile, get_profile
 from benchmark.store.provenance import git_commit
-from benchmark.runner.config import RunConfig, training_scenes
+from benchmark.runner.config import LensFile, RunConfig, training_scenes
 from benchmark.scenes import PLATE_FORMAT, SCENE_SETS, load_scenes, plate_entropy_bits
 from benchmark.runner.defaults import STANDARD_ENSEMBLE
 from benchmark.results.observer.published import fail_above_ceiling, load_study, run_violations
@@ -240,12 +240,7 @@ def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike
     names = [str(lens_names)] if isinstance(lens_names, (str, Path)) else [str(n) for n in lens_names]
     if not names:
         raise ValueError("lenses is empty; give at least one lens name or .toml spec (see benchmark.list_lenses())")
-    known = lenses.available()
-    for name in names:  # fail before any work on a typo or a bad spec field
-        if name.endswith(".toml") or Path(name).is_file():
-            lenses.load_spec(name)
-        elif name not in known:
-            lenses.load(name)
+    names, lens_files = _lens_names(names)
     load_scenes(scenes, "val", 0, p.image_size, 0)  # validates the scene set name
     plate_format = PLATE_FORMAT if plate_format is None else plate_format  # "" is an error, not the default
     plate_entropy_bits(plate_format)  # validates the format before any work
@@ -269,8 +264,56 @@ def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike
     cfg = RunConfig(lenses=names, attacks=[r.spec for r in selection.restorers + selection.readers],
                     scenes=scenes, profile=p, seeds=_seeds(seeds), device=check_device(device),
                     plate_format=plate_format, frames=frames, budget_s=budget_s,
-                    chains=STANDARD_ENSEMBLE if standard else None)
+                    chains=STANDARD_ENSEMBLE if standard else None, lens_files=lens_files)
     return cfg, selection
+
+
+def _is_spec_path(name: str) -> bool:
+    return name.endswith(".toml") or Path(name).is_file()
+
+
+def _lens_names(given: list[str]) -> tuple[list[str], dict[str, LensFile]]:
+    """The run's lens names and its spec-file lenses, checked before any work: a registered name stays,
+    a spec file is known by its spec's `name` (rows, tables, pictures, entries), its task keys by the
+    spec's digest (a registered fixed lens's own spec file is that lens, under its name).
+
+    Raises:
+        lenses.UnknownLensError: a name neither registered nor a spec file (close names suggested).
+        lenses.LensSpecError: a spec file that does not load.
+        ValueError: two lenses of the run share a name, or a spec file takes a registered lens's name
+            for another lens.
+    """
+    known = lenses.available()
+    names: list[str] = []
+    files: dict[str, LensFile] = {}
+    sources: dict[str, str] = {}
+    for given_name in given:
+        if not _is_spec_path(given_name):
+            if given_name not in known:
+                lenses.load(given_name)  # raises with the close names
+            name = given_name
+        else:
+            spec = lenses.load_spec(given_name)
+            name = spec.name
+            if name in known:  # the registered lens's own spec file is that lens; another lens is refused
+                if not _is_registered_spec(name, spec):
+                    raise ValueError(f"lens spec {given_name!r} is named {name!r}, which is the registered lens "
+                                     f"{name!r} ({known[name]}); give the spec another name (its `name` field)")
+            else:
+                files[name] = LensFile(path=given_name, digest=config_hash(spec.to_dict()))
+        if name in sources:
+            raise ValueError(f"lenses {sources[name]!r} and {given_name!r} are both named {name!r}; results are "
+                             "keyed by the lens name: give each spec its own `name`, or name a lens once")
+        sources[name] = given_name
+        names.append(name)
+    return names, files
+
+
+def _is_registered_spec(name: str, spec: lenses.LensSpec) -> bool:
+    """Whether `spec` is the registered fixed lens `name` itself (its shipped spec file, say)."""
+    if not lenses.available()[name].startswith("lenses.builtin:"):
+        return False  # a co-designed or plugin lens: loading it to compare could train it
+    return lenses.load(name).spec.to_dict() == spec.to_dict()
 
 
 def select_attackers(requested: Sequence[AttackerLike] | None, remote: bool) -> runner.Selection:

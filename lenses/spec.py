@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -83,7 +84,8 @@ class SimulationSpec:
 class MeasuredPsfSpec:
     """A PSF measured with a point source: the optics of the lens are these images, used as given."""
 
-    files: tuple[str, ...]  # 1 (all channels, or R, G, B in one image) or 3 (R, G, B); absolute paths
+    files: tuple[str, ...]  # 1 (all channels, or R, G, B in one image) or 3 (R, G, B); absolute paths here,
+    # relative to the spec's folder in `LensSpec.to_dict` (what keys and results hold: no machine's paths)
     pixel_pitch_um: float  # pitch of the measured images' pixels on the sensor plane
     sha256: tuple[str, ...]  # of each file's bytes: the spec (and every cache key) changes with the data
     measured_on: str = ""  # the sensor (and setup) the PSF was measured with; provenance only
@@ -93,7 +95,8 @@ class MeasuredPsfSpec:
 class HeightMapSpec:
     """A phase mask given as a glass thickness map in a file (the formats `export-mask` writes); fixed."""
 
-    file: str  # absolute path; .npy, .tif/.tiff (heights in um), .dat (Zemax Grid Sag), .csv (x_mm, y_mm, height_um)
+    file: str  # absolute path (relative to the spec's folder in `LensSpec.to_dict`); .npy, .tif/.tiff (heights in
+    # um), .dat (Zemax Grid Sag), .csv (x_mm, y_mm, height_um)
     sample_pitch_um: float  # node spacing on the mask; the central node lies on the optical axis
     sha256: str  # of the file's bytes: the spec (and every cache key) changes with the data
 
@@ -118,13 +121,24 @@ class LensSpec:
             return "measured-psf"
         return "height-map" if self.height_map is not None else "zernike"
 
-    def to_dict(self) -> dict[str, Any]:
-        """Plain TOML-ready dict (without `source`); a Zernike lens's dict holds no key of the other kinds."""
+    def to_dict(self, absolute_paths: bool = False) -> dict[str, Any]:
+        """Plain TOML-ready dict (without `source`); a Zernike lens's dict holds no key of the other kinds.
+
+        The files a spec names are written relative to the spec's folder (`spec_folder`), so the dict (a
+        cache key, a results file, a leaderboard entry) is the same wherever the spec and its files lie;
+        the files' sha256 say what they hold. `absolute_paths` writes them as this machine finds them.
+        """
         d = dataclasses.asdict(self)
         d.pop("source")
         for key in ENCODER_SECTIONS:
             if d[key] is None:
                 d.pop(key)
+        if not absolute_paths:
+            base = spec_folder(self.source)
+            if "measured_psf" in d:
+                d["measured_psf"]["files"] = tuple(_relative(f, base) for f in d["measured_psf"]["files"])
+            if "height_map" in d:
+                d["height_map"]["file"] = _relative(d["height_map"]["file"], base)
         if d["mask"]["bounds_um"] is None:
             d["mask"].pop("bounds_um")
         if d["mask"]["random_seed"] is None:
@@ -345,6 +359,19 @@ def _simulation(t: dict) -> SimulationSpec:
     )
 
 
+def spec_folder(source: str) -> Path:
+    """The folder a spec's relative file names are read from: its .toml's folder, else the working directory."""
+    return (Path(source).parent if source.endswith(".toml") else Path.cwd()).resolve()
+
+
+def _relative(path: str, base: Path) -> str:
+    """`path` relative to `base`, with "/" (``..`` where it lies outside); `path` itself on another drive."""
+    try:
+        return Path(os.path.relpath(path, base)).as_posix()
+    except ValueError:  # Windows: another drive has no relative path
+        return path
+
+
 def _file(value: Any, where: str, base: Path) -> Path:
     """An existing file named by a spec, relative to the spec's folder."""
     if not isinstance(value, str) or not value:
@@ -476,7 +503,7 @@ def _encoder(raw: dict, source: str, optics: OpticsSpec
     table = raw[given[0]]
     if not isinstance(table, dict):
         raise LensSpecError(f"[{given[0]}] must be a table, got {type(table).__name__}")
-    base = Path(source).parent if source.endswith(".toml") else Path.cwd()
+    base = spec_folder(source)
     if given[0] == "height_map":
         return MaskSpec(zernike_um=()), None, _height_map(table, base, optics)
     return MaskSpec(zernike_um=()), _measured_psf(table, base), None
@@ -546,8 +573,9 @@ def _toml_value(v: Any) -> str:
 
 
 def spec_to_toml(spec: LensSpec) -> str:
-    """Serialise a spec to TOML text that `load_spec` reads back to an equal spec."""
-    d = spec.to_dict()
+    """Serialise a spec to TOML text that `load_spec` reads back to an equal spec, wherever the text is
+    written (the files it names are written as absolute paths)."""
+    d = spec.to_dict(absolute_paths=True)
     if d["mask"].get("random_seed") is not None:
         d["mask"].pop("random_seed")  # the drawn coefficients are written out instead
     lines = [f"name = {_toml_value(d['name'])}", f"description = {_toml_value(d['description'])}"]

@@ -10,6 +10,14 @@ from benchmark.store.profiles import Profile
 from benchmark.scenes import PLATE_FORMAT
 
 
+@dataclass(frozen=True)
+class LensFile:
+    """A lens the run reads from a spec file: where the file is, and a digest of what it says."""
+
+    path: str    # the .toml spec, as the run was given it
+    digest: str  # of the spec's content (`LensSpec.to_dict`, which holds the sha256 of every file it names)
+
+
 @dataclass
 class RunConfig:
     lenses: list[str]
@@ -25,6 +33,17 @@ class RunConfig:
     # The attack chains to run (a restorer, a reader on the sensor image, or "restorer>reader"); None:
     # every reader on the sensor image and after every restorer (the full cross product).
     chains: tuple[str, ...] | None = None
+    # Lenses given as spec files, by the name the run knows them by (the spec's `name`); a task of
+    # such a lens is keyed by its digest too, so an edited spec is recomputed, not served from cache.
+    lens_files: dict[str, LensFile] = field(default_factory=dict)
+
+    def lens_source(self, name: str) -> str:
+        """What `lenses.load` takes for the run's lens `name`: its spec file, or the registered name."""
+        return self.lens_files[name].path if name in self.lens_files else name
+
+    def lens_tag(self, name: str) -> str:
+        """The part of a task key that tells versions of the lens `name` apart ("" for a registered lens)."""
+        return self.lens_files[name].digest[:12] if name in self.lens_files else ""
 
     def wants(self, chain: str) -> bool:
         """Whether the run measures `chain` (always, in the full cross product)."""

@@ -46,6 +46,7 @@ class Task:
         kind: clean-utility, spectrum, sharp, lens, utility, bound, fit or evaluate.
         seed: The run seed.
         lens: Lens name (empty for per-seed tasks).
+        lens_tag: For a lens read from a spec file, a digest of the spec (`RunConfig.lens_tag`): in the key.
         restorers: Restorers the task runs (one for `fit`).
         readers: Readers the task runs.
         deps: Keys of the tasks whose artifacts it needs.
@@ -56,6 +57,7 @@ class Task:
     seed: int
     lens: str = ""
     restorers: tuple[AttackerRef, ...] = ()
+    lens_tag: str = ""
     readers: tuple[AttackerRef, ...] = ()
     deps: tuple[str, ...] = ()
     cpus: float = 1.0
@@ -63,15 +65,18 @@ class Task:
 
     @property
     def key(self) -> str:
-        """File-name-safe identity: kind, seed, lens and, for a fit, the restorer's name."""
-        parts = [self.kind, f"s{self.seed}", self.lens, *(r.name for r in self.restorers if self.kind == "fit")]
+        """File-name-safe identity: kind, seed, lens (with its spec's digest) and, for a fit, the restorer's
+        name."""
+        parts = [self.kind, f"s{self.seed}", self.lens, self.lens_tag,
+                 *(r.name for r in self.restorers if self.kind == "fit")]
         text = "_".join(p for p in parts if p)
         return "".join(c if c.isalnum() or c in "-_." else "-" for c in text)
 
 
-def fit_task(seed: int, lens: str, restorer: AttackerRef, deps: tuple[str, ...] = (), gpus: float = 0.0) -> Task:
+def fit_task(seed: int, lens: str, restorer: AttackerRef, deps: tuple[str, ...] = (), gpus: float = 0.0,
+             lens_tag: str = "") -> Task:
     """The task that fits `restorer` on `lens` (its key is what the evaluate task looks up)."""
-    return Task("fit", seed, lens, restorers=(restorer,), deps=deps, cpus=2, gpus=gpus)
+    return Task("fit", seed, lens, restorers=(restorer,), deps=deps, cpus=2, gpus=gpus, lens_tag=lens_tag)
 
 
 def run_directory(cfg: RunConfig, restorers: list[AttackerRef], readers: list[AttackerRef]) -> Path:
@@ -98,11 +103,12 @@ def plan(cfg: RunConfig, restorers: list[AttackerRef], readers: list[AttackerRef
         spectrum = Task("spectrum", seed)
         tasks += [clean, spectrum, Task("sharp", seed, readers=tuple(readers), deps=(clean.key,), gpus=gpu)]
         for lens in cfg.lenses:
-            t_lens = Task("lens", seed, lens, deps=(clean.key,), cpus=2, gpus=gpu)
-            t_util = Task("utility", seed, lens, deps=(t_lens.key, clean.key), cpus=2, gpus=gpu)
-            t_bound = Task("bound", seed, lens, deps=(t_lens.key, spectrum.key))
-            fits = [fit_task(seed, lens, r, (t_lens.key,), gpu) for r in restorers]
+            tag = cfg.lens_tag(lens)
+            t_lens = Task("lens", seed, lens, deps=(clean.key,), cpus=2, gpus=gpu, lens_tag=tag)
+            t_util = Task("utility", seed, lens, deps=(t_lens.key, clean.key), cpus=2, gpus=gpu, lens_tag=tag)
+            t_bound = Task("bound", seed, lens, deps=(t_lens.key, spectrum.key), lens_tag=tag)
+            fits = [fit_task(seed, lens, r, (t_lens.key,), gpu, lens_tag=tag) for r in restorers]
             t_eval = Task("evaluate", seed, lens, restorers=tuple(restorers), readers=tuple(readers),
-                          deps=(t_lens.key, t_util.key, *(f.key for f in fits)), cpus=2, gpus=gpu)
+                          deps=(t_lens.key, t_util.key, *(f.key for f in fits)), cpus=2, gpus=gpu, lens_tag=tag)
             tasks += [t_lens, t_util, t_bound, *fits, t_eval]
     return tasks

@@ -264,7 +264,7 @@ def _clean_net(cfg: RunConfig, seed: int, scenes: list[Scene]) -> torch.nn.Modul
 
 
 def _lens(cfg: RunConfig, name: str, seed: int) -> lenses.Lens:
-    return lenses.load(name, profile=cfg.profile, seed=seed, device=cfg.device, cache_dir=cfg.cache_dir,
+    return lenses.load(cfg.lens_source(name), profile=cfg.profile, seed=seed, device=cfg.device, cache_dir=cfg.cache_dir,
                        scenes=training_scenes(cfg.scenes)).to(cfg.device)
 
 
@@ -449,7 +449,7 @@ def _evaluate(task: Task, cfg: RunConfig, staging: Path) -> TaskResult:
 def _fit_meta(directory: Path, task: Task, ref: AttackerRef) -> dict:
     """The meta of the restorer's fit task; {} when another run is just redoing it (the evaluate
     task then fits the restorer itself)."""
-    done = load_result(directory, fit_task(task.seed, task.lens, ref))
+    done = load_result(directory, fit_task(task.seed, task.lens, ref, lens_tag=task.lens_tag))
     return {} if done is None else done.meta
 
 

@@ -80,9 +80,22 @@ def test_shipped_example_is_the_gp_mask(gp):
 def test_spec_round_trips(tmp_path):
     spec = load_spec(SPEC_DIR / "examples" / "gp-height-map.toml")
     stored = json.loads(json.dumps(spec.to_dict()))
-    assert parse_spec(stored).to_dict() == spec.to_dict()
-    (tmp_path / "back.toml").write_text(spec_to_toml(spec))
-    assert load_spec(tmp_path / "back.toml").to_dict() == spec.to_dict()
+    assert stored["height_map"]["file"] == "gp-mask.npy"  # beside the spec: no path of this machine
+    assert parse_spec(stored, source=spec.source).to_dict() == spec.to_dict()
+    (tmp_path / "back.toml").write_text(spec_to_toml(spec))  # elsewhere: it names the file absolutely
+    back = load_spec(tmp_path / "back.toml")
+    assert back.to_dict(absolute_paths=True) == spec.to_dict(absolute_paths=True)
+    assert back.to_dict()["height_map"]["file"].endswith("lenses/specs/examples/gp-mask.npy")
+
+
+def test_a_spec_and_its_file_moved_together_keep_their_dict(tmp_path):
+    """The dict is a cache key and what results hold: it does not change with where the folder lies."""
+    spec = load_spec(SPEC_DIR / "examples" / "gp-height-map.toml")
+    for name in ("gp-height-map.toml", "gp-mask.npy"):
+        (tmp_path / name).write_bytes((SPEC_DIR / "examples" / name).read_bytes())
+    moved = load_spec(tmp_path / "gp-height-map.toml")
+    assert moved.to_dict() == spec.to_dict() and moved.height_map.file != spec.height_map.file
+    assert str(tmp_path) not in json.dumps(moved.to_dict())
 
 
 def test_export_mask_refuses_a_non_zernike_lens():
