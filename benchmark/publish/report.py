@@ -21,7 +21,7 @@ from benchmark.results.entries import LEADERBOARD, Entry, display_order, load_en
 from benchmark.publish import board_files
 from benchmark.publish.page import write_page
 from benchmark.publish.tables import (CONVENTION, ensemble_summary, findings_table, flags_table, main_table,
-                                      takeaways, violations_table)
+                                      readme_table, takeaways, violations_table)
 from benchmark.results.attack_gap import CEILING_ALARM, GAP_ALARM, Flag, entry_flags
 from benchmark.results.observer.published import entry_violations, load_study
 
@@ -162,8 +162,8 @@ README_START, README_END = "<!-- results:start -->", "<!-- results:end -->"
 
 
 def update_readme(readme: Path, directory: Path = LEADERBOARD) -> bool:
-    """Replace the rendered results table between the markers of the project README (if present), holding
-    the leaderboard's lock (a concurrent publish must not be overwritten by an older table)."""
+    """Replace the short results table (`tables.readme_table`, the quick entries) between the markers of the
+    project README (if present; False when not), holding the leaderboard's lock (a concurrent publish must not be overwritten by an older table)."""
     with locked(directory):
         return _update_readme(readme, directory)
 
@@ -175,7 +175,6 @@ def _update_readme(readme: Path, directory: Path) -> bool:
     entries = display_order(load_entries(directory))
     head, rest = text.split(README_START, 1)
     _, tail = rest.split(README_END, 1)
-    summary = ensemble_summary(entries)
-    atomic_write_text(readme, f"{head}{README_START}\n{main_table(entries, load_study(directory))}\n"
-                              + (f"\n{summary}\n" if summary else "") + f"{README_END}{tail}")
+    atomic_write_text(readme, f"{head}{README_START}\n{readme_table(entries, load_study(directory))}\n"
+                              f"{README_END}{tail}")
     return True

@@ -391,6 +391,26 @@ def headline_columns(study: Mapping[str, Any] | None) -> tuple[Column, ...]:
             Column("seeds", _text(lambda e: ",".join(map(str, e.seeds))), _SEEDS_TIP))
 
 
+def _measured_on(e: Entry, attacks: set[str] | None) -> Cell:
+    dates = sorted(str(r.provenance.get("date", ""))[:10] for r in e.rows if r.provenance.get("date"))
+    return (dates[-1] if dates else "not recorded"), None
+
+
+def readme_columns(study: Mapping[str, Any] | None) -> tuple[Column, ...]:
+    """The project README's short table: the headline columns, the ensemble's PSNR and when the entry was
+    measured (its newest row's date: entries of other dates may be of another version)."""
+    lens, miou, plates, gap, seeds = headline_columns(study)
+    return (lens, miou, plates, Column("ensemble PSNR dB [95 %]", _ensemble_psnr, "per scene, its best restorer"),
+            gap, seeds, Column("measured", _measured_on, "the date of the entry's newest row"))
+
+
+def readme_table(entries: Sequence[Entry], study: Mapping[str, Any] | None = None, profile: str = "quick") -> str:
+    """The project README's results table (markdown): `readme_columns`, one line per entry of `profile`."""
+    columns = readme_columns(study)
+    return _markdown([c.header for c in columns],
+                     [[c.cell(e, None)[0] for c in columns] for e in entries if e.profile == profile])
+
+
 def _pct(interval: tuple[float, float]) -> str:
     return f"[{100 * interval[0]:.1f}, {100 * interval[1]:.1f}]"
 
