@@ -288,12 +288,12 @@ def attacker_catalogue() -> list[dict[str, Any]]:
     default, a one-line description and where it comes from; one that fails to import says why."""
     import attacks
     from attacks.registry import ATTACKS_GROUP
-    from benchmark.runner.defaults import STANDARD_ENSEMBLE
+    from benchmark.runner.defaults import STANDARD_ENSEMBLE, chain_parts
     from common.plugins import discover
     rows = []
     for name, entry in sorted(discover(ATTACKS_GROUP).items()):
         row: dict[str, Any] = {"name": name, "source": entry.value,
-                               "standard_chains": [c for c in STANDARD_ENSEMBLE if name in c.split(">")]}
+                               "standard_chains": [c for c in STANDARD_ENSEMBLE if name in chain_parts(c)]}
         try:
             cls = entry.load()
             row.update(kind="reader" if issubclass(cls, attacks.Reader) else "restorer",

@@ -55,7 +55,9 @@ class IdealObserverReader(Reader):
     hints: ClassVar[frozenset[str]] = frozenset({"plate_boxes"})
     threat_model: ClassVar[ThreatModel] = ThreatModel.LENS_ACCESS
     requires: ClassVar[frozenset[str]] = frozenset({"lens"})
-    run_by_default: ClassVar[bool] = False  # seconds per plate: run it by name (--attack ideal-observer)
+    # Seconds per plate: not in the full cross product; the standard ensemble runs it as a cascade, on the
+    # plates no other chain read (benchmark.runner.cascade); --attack ideal-observer reads every plate.
+    run_by_default: ClassVar[bool] = False
 
     def __init__(self, beam: int = 3, max_sweeps: int = 4, min_width_px: int = 8) -> None:
         if beam < 1 or max_sweeps < 1:

@@ -79,6 +79,7 @@ LEARNS = "learns"  # note: "true" when the row's attacker (or a part of its chai
 CHAIN_SEPARATOR = ">"
 # Kinds whose `attack` is the kind itself (no attacker involved).
 _SELF_NAMED = ("lens", "utility", "bound")
+CASCADE_PREFIX = "cascade:"  # a reader row's attack "cascade:<reader>": the reader run as a cascade
 LEGACY_PROVENANCE = ("git_commit", "packages", "python", "device", "threads", "date", "wall_s")
 # String-valued facts of a legacy flat row that are neither metrics nor provenance.
 _LEGACY_NOTES = ("bound_assumptions", "bound_plate_format")
@@ -282,6 +283,9 @@ class Row:
             if self.attack != self.kind or self.restorer is not None or self.reader is not None:
                 raise ValueError(f"a {self.kind} row has attack {self.kind!r} and no restorer/reader, "
                                  f"got attack={self.attack!r} restorer={self.restorer!r} reader={self.reader!r}")
+        elif self.kind == "reader" and self.reader is not None and self.attack == cascade_name(self.reader):
+            if self.restorer is not None:
+                raise ValueError(f"a cascade reader row reads the sensor image: no restorer, got {self.restorer!r}")
         elif self.kind in expected:
             if (self.restorer, self.reader) != expected[self.kind]:
                 raise ValueError(f"a {self.kind} row names its attacker in attack and {self.kind}, got "
@@ -371,6 +375,12 @@ class Row:
 def chain_name(restorer: str, reader: str) -> str:
     """The attack name of a reader run on a restorer's output."""
     return f"{restorer}{CHAIN_SEPARATOR}{reader}"
+
+
+def cascade_name(reader: str) -> str:
+    """The attack name of a reader run as a cascade: last, on the plates no other chain read
+    (benchmark.runner.cascade)."""
+    return f"{CASCADE_PREFIX}{reader}"
 
 
 def threat_models(rows: Iterable[Row]) -> dict[str, str | None]:

@@ -10,7 +10,10 @@ told otherwise (``benchmark.runner.runner.standard_attackers``).
 
 from __future__ import annotations
 
-__all__ = ["LEARNED_READER", "MEASURED_ADDITIONS", "PROPOSED_ENSEMBLE", "STANDARD_ENSEMBLE"]
+from benchmark.results.schema import CASCADE_PREFIX, cascade_name
+
+__all__ = ["CASCADE", "CASCADE_PREFIX", "LEARNED_READER", "MEASURED_ADDITIONS", "PROPOSED_ENSEMBLE",
+           "STANDARD_ENSEMBLE", "chain_parts"]
 
 # What the rule selects on the published quick entries (see the module docstring and DOCS); the test
 # recomputes it from leaderboard/entries/*quick*.json.
@@ -27,5 +30,13 @@ MEASURED_ADDITIONS: tuple[str, ...] = ("nafnet-known-psf", "nafnet-known-psf>lpd
 # The run's default chains: the proposal and the uncorrected image as a reference restorer. The learned
 # reader is always in it (the rule keeps it wherever entries hold it) and stays last of the readers, the
 # order the published entries' runs evaluated their chains in.
+# A reader named "cascade:<reader>" runs after every other chain, only on the plates none of them read
+# (benchmark.runner.cascade): the maximum-likelihood reader costs seconds a plate.
+CASCADE: tuple[str, ...] = (cascade_name("ideal-observer"),)
 STANDARD_ENSEMBLE: tuple[str, ...] = (tuple(c for c in PROPOSED_ENSEMBLE if c != LEARNED_READER) + MEASURED_ADDITIONS
-                                      + (LEARNED_READER, "raw"))
+                                      + (LEARNED_READER, "raw") + CASCADE)
+
+
+def chain_parts(chain: str) -> list[str]:
+    """The attackers a chain of the ensemble names: "restorer>reader" -> both, "cascade:reader" -> the reader."""
+    return chain.removeprefix(CASCADE_PREFIX).split(">")

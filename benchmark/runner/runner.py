@@ -23,7 +23,7 @@ from benchmark.runner.planning import AttackerRef, Task, plan, run_directory
 from benchmark.runner.tasks import TaskResult
 from benchmark.store.provenance import provenance
 from benchmark.runner.config import RunConfig
-from benchmark.runner.defaults import STANDARD_ENSEMBLE
+from benchmark.runner.defaults import STANDARD_ENSEMBLE, chain_parts
 from benchmark.results.schema import Results as ResultsFile
 from benchmark.results.schema import Row, RowError, settings_hash, write_results
 
@@ -70,7 +70,7 @@ def select_attackers(requested: list[str] | None) -> Selection:
 
 def standard_attackers() -> list[str]:
     """The attackers of the standard ensemble (`STANDARD_ENSEMBLE`), each once, in order of first mention."""
-    return list(dict.fromkeys(part for chain in STANDARD_ENSEMBLE for part in chain.split(">")))
+    return list(dict.fromkeys(part for chain in STANDARD_ENSEMBLE for part in chain_parts(chain)))
 
 
 def load_failure_rows(cfg: RunConfig, failures: list[attacks.PluginFailure]) -> tuple[list[Row], dict[str, dict]]:

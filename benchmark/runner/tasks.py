@@ -33,6 +33,7 @@ from benchmark.store.cache import (CHECKSUM_SUFFIX, ArtifactCache, discard, excl
                                    write_verified)
 from benchmark.codesign.trainer import TRAINER_VERSION
 from benchmark.runner.evaluation import Attacked, PlateSet, Target, attempt, fit_readers, read_sensor, run_reader, run_restorers
+from benchmark.runner.cascade import run_cascade, wanted_readers
 from benchmark.runner.intervals import utility_intervals
 from benchmark.runner.planning import AttackerRef, Task, fit_task
 from benchmark.results.plate_scoring import READABLE_MIN_WIDTH_PX, SCORED_MIN_WIDTH_PX, WIDTH_BINS_PX, scored
@@ -439,6 +440,8 @@ def _evaluate(task: Task, cfg: RunConfig, staging: Path) -> TaskResult:
     # Each restorer's output is read by every reader right away (run_restorers), then dropped.
     run_restorers(target, restorers, fitted, cfg, builder, out, ready)
     out.finish()
+    for cascading in wanted_readers(cfg, ready):  # last: it reads only what no chain above read
+        run_cascade(target, cascading, cfg, builder, out)
     pictures = [sample_grid(target, lens, out, staging)]
     for r in ready:
         gallery = plate_gallery(target, out, r.reader.name, staging)

@@ -135,8 +135,11 @@ def render(directory: Path = LEADERBOARD, date: str | None = None) -> str:
         + ".", "",
         f"Left out of the proposal ({len(dropped)}): " + (", ".join(f"`{a}`" for a in dropped) or "none") + ".", "",
         "This is `benchmark.runner.defaults.PROPOSED_ENSEMBLE`. The run's default, "
-        "`STANDARD_ENSEMBLE`, is it with `learned-reader` on the sensor image and the `raw` reference (the "
-        "uncorrected image's PSNR, read by no chain): `python -m benchmark run` measures those chains only, "
+        "`STANDARD_ENSEMBLE`, is it with the attackers newer than these entries that were measured stronger "
+        "(`MEASURED_ADDITIONS`), `learned-reader` on the sensor image, the `raw` reference (the "
+        "uncorrected image's PSNR, read by no chain) and last the cascade (`CASCADE`: the maximum-likelihood "
+        "reader on the plates no chain before it read, benchmark.runner.cascade): `python -m benchmark run` "
+        "measures those chains only, "
         "`--attack NAME` exactly the attackers named (every reader after every restorer), `--all-chains` the full "
         "cross product of the attackers that run by default. Entries published before the standard ensemble "
         "hold the full cross product until `python -m benchmark publish` replaces them; those re-published with "

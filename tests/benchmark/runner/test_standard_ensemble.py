@@ -9,7 +9,7 @@ import torch
 
 import attacks
 from benchmark import api
-from benchmark.runner.defaults import MEASURED_ADDITIONS, PROPOSED_ENSEMBLE, STANDARD_ENSEMBLE
+from benchmark.runner.defaults import CASCADE, MEASURED_ADDITIONS, PROPOSED_ENSEMBLE, STANDARD_ENSEMBLE, chain_parts
 from benchmark.runner import runner
 from benchmark.runner.config import RunConfig
 from benchmark.runner.evaluation import Attacked, PlateSet, ReadyReader, Target, read_sensor, run_restorers
@@ -69,11 +69,13 @@ def test_only_the_chains_of_the_ensemble_are_read_and_their_restorers_windows_re
     assert sorted(everything) == sorted(["read", "unread", "blind", "read>blind", "unread>blind"])
 
 
-def test_the_standard_ensemble_is_the_proposal_with_the_measured_additions_the_learned_reader_and_raw():
-    assert set(STANDARD_ENSEMBLE) == set(PROPOSED_ENSEMBLE) | set(MEASURED_ADDITIONS) | {"learned-reader", "raw"}
-    assert len(STANDARD_ENSEMBLE) == len(set(STANDARD_ENSEMBLE)) and STANDARD_ENSEMBLE[-2:] == ("learned-reader", "raw")
+def test_the_standard_ensemble_is_the_proposal_with_the_measured_additions_the_learned_reader_raw_and_the_cascade():
+    assert set(STANDARD_ENSEMBLE) == (set(PROPOSED_ENSEMBLE) | set(MEASURED_ADDITIONS) | {"learned-reader", "raw"}
+                                      | set(CASCADE))
+    assert len(STANDARD_ENSEMBLE) == len(set(STANDARD_ENSEMBLE))
+    assert STANDARD_ENSEMBLE[-3:] == ("learned-reader", "raw", *CASCADE)
     named = runner.standard_attackers()
-    assert len(named) == len(set(named)) and set(named) == {p for c in STANDARD_ENSEMBLE for p in c.split(">")}
+    assert len(named) == len(set(named)) and set(named) == {p for c in STANDARD_ENSEMBLE for p in chain_parts(c)}
     # Every reader chain of the ensemble reads with a reader, after a restorer that is in it.
     for chain in STANDARD_ENSEMBLE:
         if ">" in chain:
