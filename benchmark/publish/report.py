@@ -20,7 +20,7 @@ from benchmark.results.charts.tradeoff import write_tradeoff_chart
 from benchmark.results.entries import LEADERBOARD, Entry, display_order, load_entries, locked
 from benchmark.publish import board_files
 from benchmark.publish.page import write_page
-from benchmark.publish.tables import (CONVENTION, ensemble_summary, findings_table, flags_table, main_table,
+from benchmark.publish.tables import (CONVENTION, bracket_lines, ensemble_summary, findings_table, flags_table, main_table,
                                       readme_table, takeaways, violations_table)
 from benchmark.results.attack_gap import CEILING_ALARM, GAP_ALARM, Flag, entry_flags
 from benchmark.results.observer.published import entry_violations, load_study
@@ -115,6 +115,9 @@ def readme_text(entries: list[Entry], charts: list[Path], pictures: list[Path], 
             "The same tables, sortable and filterable by profile, scenes and threat model, with interactive "
             "charts: [index.html](index.html) (a self-contained page; open it from disk).", "",
             "## Utility against privacy", "", main_table(entries, study), "", *([summary, ""] if summary else []),
+            *(["## Privacy, bracketed", "", "What the suite's attackers read against what any attacker could "
+               "(the ideal observer's ceiling, the tighter one where the study has it), 32-48 px plates, one "
+               "frame:", "", *brackets, ""] if (brackets := bracket_lines(entries, study)) else []),
             "## Ceiling violations", "", *violations_text(violations or []), "",
             "## Attack flags", "", *flags_text(flags or []), "",
             *(["## The paper's findings on these entries", "", findings, ""] if findings else []),

@@ -18,12 +18,12 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from benchmark.publish.findings import Finding, check_findings
-from benchmark.results.attack_gap import GAP_WIDTHS_PX, Flag, entry_gaps
+from benchmark.results.attack_gap import GAP_ALARM, GAP_WIDTHS_PX, Flag, ceiling_at, entry_gaps
 from benchmark.results import pooled
 from benchmark.results.ensemble import chain_accuracy, plate_ensemble, scene_ensemble
 from benchmark.results.entries import Entry
 from benchmark.results.markdown import md_cell
-from benchmark.results.observer.published import NOT_COMPUTED, study_record
+from benchmark.results.observer.published import NOT_COMPUTED, marginal_t1_curve, study_record
 
 # A cell: its text and the number it sorts by (None: empty).
 Cell = tuple[str, float | None]
@@ -202,11 +202,28 @@ def _observer(study: Mapping[str, Any] | None, frames: str, key: str, scale: flo
     return cell
 
 
+def _tighter(study: Mapping[str, Any] | None, width_px: int) -> Callable[[Entry, set[str] | None], Cell]:
+    """The tighter (marginalised) T = 1 plate ceiling in the bin holding `width_px`, % [95 %]."""
+    def cell(e: Entry, attacks: set[str] | None) -> Cell:
+        curve = marginal_t1_curve(study_record(study, e.lens, e.lens_spec))
+        found = None if curve is None else ceiling_at(curve, width_px)
+        if found is None:
+            return NOT_COMPUTED, None
+        value, (low, high) = found
+        return f"{100 * value:.1f} [{100 * low:.1f}, {100 * high:.1f}]", 100 * value
+    return cell
+
+
 def observer_columns(study: Mapping[str, Any] | None) -> tuple[Column, ...]:
-    """The ideal observer's plate ceiling at 32 px (T = 1) and its certified widths W_5% (T = 1, 30)."""
+    """The ideal observer's plate ceiling at 32 px (T = 1; the genie's, then the tighter one's) and its
+    certified widths W_5% (T = 1, 30)."""
     where = "; \"not computed\" where the study did not use the entry's own lens spec"
     return (Column("ceiling % at 32 px (ideal observer, T=1)", _observer(study, "t1", "plate_ceiling_w32", 100, ".1f"),
                    "the most any attacker can read of 32 px plates from one frame (the Bayesian ideal observer)" + where),
+            Column("tighter ceiling % [95 %] at 32-48 px (T=1)", _tighter(study, 32),
+                   "the same for an ideal observer not told the plate's exact position and width (averaged over the "
+                   "bin's widths): the most an attacker that must find the plate could read; \"not computed\" "
+                   "where the study has no marginalised curve for the entry's lens spec"),
             Column("W_5% px (ideal observer, T=1)", _observer(study, "t1", "w5_plate_px", 1, ".0f"),
                    "the widest plate the ideal observer reads at most 5 % of, one frame" + where),
             Column("W_5% px (ideal observer, T=30)", _observer(study, "t30", "w5_plate_px", 1, ".0f"),
@@ -409,6 +426,28 @@ def readme_table(entries: Sequence[Entry], study: Mapping[str, Any] | None = Non
     columns = readme_columns(study)
     return _markdown([c.header for c in columns],
                      [[c.cell(e, None)[0] for c in columns] for e in entries if e.profile == profile])
+
+
+def bracket_lines(entries: Sequence[Entry], study: Mapping[str, Any] | None, width_px: int = 32) -> list[str]:
+    """One sentence per entry the study covers: its privacy at the bin from `width_px` lies between what the
+    ensemble reads and the ceiling the gap is taken against (the tighter one where the study has it)."""
+    lines = []
+    for e in entries:
+        gap = next((g for g in entry_gaps(e, study) if g.low_px == width_px), None)
+        if gap is None:
+            continue
+        a = gap.ensemble
+        which = ("the tighter ceiling: an ideal observer that must find the plate" if gap.ceiling_kind == "marginal"
+                 else "the genie ceiling: an ideal observer told where the plate is")
+        low, high = gap.interval
+        points = f"{100 * GAP_ALARM:.0f} points"
+        verdict = (f"the attackers are more than {points} below it: the suite overstates this lens's privacy"
+                   if low > GAP_ALARM else f"the attackers are within {points} of it" if high < GAP_ALARM else
+                   f"cannot tell whether the attackers are within {points} of it (too few plates)")
+        lines.append(f"- **{e.lens}** ({e.profile}, {gap.where()}): between {100 * a.value:.1f} % "
+                     f"{_pct(a.interval)} read by the ensemble and {100 * gap.ceiling:.1f} % "
+                     f"{_pct(gap.ceiling_interval)} ({which}); {verdict}.")
+    return lines
 
 
 def _pct(interval: tuple[float, float]) -> str:

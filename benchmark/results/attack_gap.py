@@ -116,7 +116,7 @@ class Flag:
         return f"{self.lens} ({self.profile}): {self.kind}: {self.message}"
 
 
-def _ceiling_at(curve: CeilingCurve, width_px: float) -> tuple[float, tuple[float, float]] | None:
+def ceiling_at(curve: CeilingCurve, width_px: float) -> tuple[float, tuple[float, float]] | None:
     """The T = 1 plate ceiling and its 95 % interval at `width_px` (linear between tabulated widths; a
     marginalised curve: the value of the bin [w_k, high_k) holding `width_px`); None outside the tabulated
     widths (or bins)."""
@@ -148,9 +148,9 @@ def attack_gaps(ensemble: PlateEnsemble, curve: CeilingCurve, fallback: CeilingC
     out = []
     for low, high, accuracy, pooled in bins:
         used = curve
-        found = _ceiling_at(curve, low)
+        found = ceiling_at(curve, low)
         if found is None and fallback is not None:
-            used, found = fallback, _ceiling_at(fallback, low)
+            used, found = fallback, ceiling_at(fallback, low)
         if found is not None and accuracy.n:
             out.append(Gap(low, high, found[0], found[1], accuracy, pooled, used.kind))
     return out

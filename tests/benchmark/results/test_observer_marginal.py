@@ -279,3 +279,37 @@ def test_the_chart_draws_the_tighter_ceiling_per_bin_and_the_bracket_to_the_ense
     spans = [(float(v[:, 0].min()), float(v[:, 0].max()), float(v[:, 1].min()), float(v[:, 1].max()))
              for c in bands for v in (c.get_paths()[0].vertices,)]
     assert (24.0, 32.0, 25.0, 60.0) in [tuple(round(x, 6) for x in s) for s in spans]  # bin 24-32: 25 % to 60 %
+
+
+def test_the_board_brackets_privacy_between_the_ensemble_and_the_tighter_ceiling(planted):
+    """The tighter-ceiling column and the bracket sentence give the marginalised ceiling where the study has
+    it (the genie's, said so, where not), beside what the ensemble reads; the verdict is the gap's interval's."""
+    from benchmark.publish.tables import bracket_lines, observer_columns
+    from benchmark.results.entries import make_entry
+    from benchmark.results.schema import Units
+    reads, curves = planted["reads"], planted["curves"]
+    study, spec = _study(curves)
+
+    def entry(hits: np.ndarray):
+        row = Row(kind="reader", attack="honest", reader="honest", threat_model="lens-access", lens="defocus", seed=0,
+                  profile="quick", scenes="synthetic", metrics={"plate_acc": float(hits.mean()), "n_plates": 400.0})
+        row.set_units(Units.from_names("plate", [f"synthetic/val/0/{i:05d}@x0y0p0#0" for i in range(len(hits))],
+                                       {"correct": hits.astype(int).tolist(), "char_errors": [0] * len(hits),
+                                        "width_px": [30] * len(hits)}))
+        return make_entry("defocus", [row], {}, None, spec)
+
+    tight = curves["marginal"].plate_ceiling[0]
+    honest = entry(reads["honest"][:400])
+    column = observer_columns(study)[1]
+    assert column.header.startswith("tighter ceiling") and column.cell(honest, None)[1] == pytest.approx(100 * tight)
+    (line,) = bracket_lines([honest], study, width_px=24)
+    assert f"{100 * tight:.1f} %" in line and "tighter ceiling" in line and "within 30 points" in line
+    (weak,) = bracket_lines([entry(np.zeros(400, bool))], study, width_px=24)
+    assert "between 0.0 %" in weak and ("more than 30 points below" in weak) == (tight > 0.35)
+    (few,) = bracket_lines([entry(np.zeros(3, bool))], study, width_px=24)
+    assert "cannot tell" in few
+    genie_only = {"lenses": {"defocus": {k: v for k, v in study["lenses"]["defocus"].items() if k != "marginal"}}}
+    assert column.cell(honest, None)[0] != "not computed" and observer_columns(genie_only)[1].cell(honest, None)[0] == \
+        "not computed"
+    (genie_line,) = bracket_lines([honest], genie_only, width_px=24)
+    assert "genie ceiling" in genie_line
