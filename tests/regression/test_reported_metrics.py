@@ -2,12 +2,13 @@
 
 - fast, always: the smoke profile of `ideal` and `defocus` (seed 0, the cheap attackers) reproduces
   the published smoke entries within tolerances derived from the measured seed spread;
-- exact, RUN_SLOW=1: re-runs the quick profile of a published entry and checks every metric;
-- the leaderboard's table and charts regenerate identically from the entries.
+- exact, RUN_SLOW=1: re-runs the quick profile of a published entry and checks every metric.
+
+That the leaderboard's pages and charts regenerate identically from the entries is checked in
+tests/leaderboard/test_board_files.py.
 """
 
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -15,7 +16,6 @@ from pathlib import Path
 import pytest
 
 from benchmark.results import entries as leaderboard
-from benchmark.publish import report as leaderboard_report
 from benchmark.results.entries import Entry
 from benchmark.results.schema import Row, read_results
 
@@ -87,14 +87,3 @@ def test_quick_profile_entry_reproduces_exactly(tmp_path, lens):
     seed = entry.seeds[0]
     rows = rerun(tmp_path, "quick", [lens], attacks, seed)
     assert compare(entry, rows, seed, None) > 20
-
-
-def test_table_and_charts_regenerate_identically(tmp_path):
-    copy = tmp_path / "leaderboard"
-    shutil.copytree(leaderboard.LEADERBOARD, copy)
-    leaderboard_report.render(copy)
-    for path in [copy / "README.md", copy / "attackers.md", copy / "charts.md", copy / "index.html",
-                 *sorted((copy / "charts").glob("*.png"))]:
-        published = leaderboard.LEADERBOARD / path.relative_to(copy)
-        assert published.is_file(), f"{published} is not published; run python -m benchmark report"
-        assert path.read_bytes() == published.read_bytes(), f"{published} differs from its entries"

@@ -63,7 +63,7 @@ def test_a_failed_export_falls_back_to_torch(monkeypatch, caplog):
     assert ocr_onnx.feature_extractor(model, "torch") is model.FeatureExtraction
 
 
-DELAY_S = 0.5
+DELAY_S = 1.0
 
 
 @pytest.mark.slow
@@ -84,7 +84,7 @@ def test_auto_keeps_whichever_backend_the_probe_times_faster(monkeypatch):
         fast = "torch" if slow == "onnx" else "onnx"
         assert ocr_onnx.choices()["backend"] == fast
         probe = ocr_onnx.choices()["probe_s"]
-        assert probe[slow] >= DELAY_S > probe[fast]
+        assert probe[slow] >= DELAY_S and probe[slow] > probe[fast]  # the fast side may take 0.6 s under load
         assert (chosen is model.FeatureExtraction) == (fast == "torch")
         assert ocr_onnx.feature_extractor(model, "auto") is chosen  # decided once per process
         monkeypatch.undo()
