@@ -296,7 +296,7 @@ def _lens_names(given: list[str]) -> tuple[list[str], dict[str, LensFile]]:
             spec = lenses.load_spec(given_name)
             name = spec.name
             if name in known:  # the registered lens's own spec file is that lens; another lens is refused
-                if not _is_registered_spec(name, spec):
+                if not _is_registered_spec(name, known[name], spec):
                     raise ValueError(f"lens spec {given_name!r} is named {name!r}, which is the registered lens "
                                      f"{name!r} ({known[name]}); give the spec another name (its `name` field)")
             else:
@@ -309,9 +309,10 @@ def _lens_names(given: list[str]) -> tuple[list[str], dict[str, LensFile]]:
     return names, files
 
 
-def _is_registered_spec(name: str, spec: lenses.LensSpec) -> bool:
-    """Whether `spec` is the registered fixed lens `name` itself (its shipped spec file, say)."""
-    if not lenses.available()[name].startswith("lenses.builtin:"):
+def _is_registered_spec(name: str, entry_point: str, spec: lenses.LensSpec) -> bool:
+    """Whether `spec` is the registered fixed lens `name` (entry point `entry_point`) itself (its shipped
+    spec file, say)."""
+    if not entry_point.startswith("lenses.builtin:"):
         return False  # a co-designed or plugin lens: loading it to compare could train it
     return lenses.load(name).spec.to_dict() == spec.to_dict()
 

@@ -24,15 +24,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from benchmark.results.plate_scoring import WIDTH_BINS_PX, PlateOutcome, pooled, score_scene, summarise
-from benchmark.results.schema import CASCADE_PREFIX, LEARNS, RowError, cascade_name
+from benchmark.results.plate_scoring import WIDTH_BINS_PX, PlateOutcome, score_scene
+from benchmark.results.schema import LEARNS, RowError, cascade_name
 from benchmark.runner.config import RunConfig
-from benchmark.runner.evaluation import Attacked, ReadyReader, Target, read_plates
-from benchmark.runner.intervals import plate_intervals
+from benchmark.runner.evaluation import Attacked, ReadyReader, Target, plate_records, plate_row, read_plates
 from benchmark.runner.isolation import attempt
-from benchmark.runner.rows import RowBuilder, plate_units
+from benchmark.runner.rows import RowBuilder
 
-__all__ = ["CASCADE_PREFIX", "PLATES_PER_LENS", "cascade_reader", "run_cascade", "wanted_readers"]
+__all__ = ["PLATES_PER_LENS", "run_cascade", "wanted_readers"]
 
 log = logging.getLogger(__name__)
 
@@ -41,11 +40,6 @@ OPEN_BIN_BELOW = 0.7  # a bin where the chains before read this share or more is
 # 1.5-4.5 s a plate on 2 cores (leaderboard/studies/ideal_observer_readers.json).
 PLATES_PER_LENS = {"smoke": 0, "quick": 60, "paper": 400}  # smoke: the row, not the cost
 DEFAULT_PLATES = 60
-
-
-def cascade_reader(chain: str) -> str | None:
-    """The reader a cascade chain runs, or None for any other chain."""
-    return chain[len(CASCADE_PREFIX):] if chain.startswith(CASCADE_PREFIX) else None
 
 
 def wanted(cfg: RunConfig, reader: str) -> bool:
@@ -94,20 +88,17 @@ def run_cascade(target: Target, ready: ReadyReader, cfg: RunConfig, rows: RowBui
     seconds = time.perf_counter() - t0
     outcomes = [o for i in range(len(scored)) for o in outcomes_by_window[i]]
     read_now = sum(o.correct for i in pick for o in outcomes_by_window[i])
-    readable_outcomes = pooled(outcomes)
     open_bins = sorted(b for b, s in share.items() if s < OPEN_BIN_BELOW)
-    metrics = {**summarise(readable_outcomes), "cascade_given": float(len(pick)), "cascade_read": float(read_now),
-               "cascade_s": seconds, "cascade_s_per_plate": seconds / len(pick) if pick else 0.0}
     note = (f"given the {len(pick)} widest plates (at most {limit}) that no earlier chain read, in the width bins "
             f"{_bins_text(open_bins)} where the earlier chains read under {OPEN_BIN_BELOW:.0%}; it read {read_now} of "
             "them; every other plate counts as not read by it")
-    row = rows.row("reader", metrics, attack=chain, reader=reader.name, threat_model=reader.threat_model.value,
-                   settings=settings, notes={**ready.notes, LEARNS: "true" if reader.learns else "false",
-                                             "cascade": note})
-    plate_intervals(row, readable_outcomes)
-    row.set_units(plate_units(outcomes))
+    row = plate_row(rows, "reader", chain, outcomes,
+                    {"cascade_given": float(len(pick)), "cascade_read": float(read_now), "cascade_s": seconds,
+                     "cascade_s_per_plate": seconds / len(pick) if pick else 0.0},
+                    reader=reader.name, threat_model=reader.threat_model.value, settings=settings,
+                    notes={**ready.notes, LEARNS: "true" if reader.learns else "false", "cascade": note})
     out.rows.append(row)
-    out.plates.extend({"lens": target.lens_name, "attack": chain, "seed": row.seed, **o.__dict__} for o in outcomes)
+    out.plates.extend(plate_records(target, row, outcomes))
     log.info("%s on %s: %s (%.0f s)", chain, target.lens_name, note, seconds)
 
 

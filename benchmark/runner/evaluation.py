@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import torch
 from tqdm.auto import tqdm
@@ -438,16 +439,28 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
     # A chain needs what its strongest part needs (a known-PSF restorer's lens access, say).
     threat = reader.threat_model if restorer is None else attacks.ThreatModel.strongest(
         reader.threat_model, out.threat_models[restorer])
-    # The row's pooled figures count the readable plates; its units hold every scored plate (from 8 px).
+    row = plate_row(rows, kind, chain, outcomes, timing, restorer=restorer, reader=reader.name,
+                    threat_model=threat.value, settings=settings,
+                    notes={**ready.notes, LEARNS: _flag(ready.reader.learns or out.learns.get(restorer or "", False))})
+    chain_rows.append(row)
+    out.reader_plates.setdefault(reader.name, []).extend(plate_records(target, row, outcomes))
+
+
+def plate_row(rows: RowBuilder, kind: str, chain: str, outcomes: list[PlateOutcome], metrics: dict[str, float],
+              **fields: Any) -> Row:
+    """A reader or chain row scored from its per-plate outcomes: its pooled figures (and their intervals)
+    count the readable plates, its units hold every scored plate (from 8 px); `metrics` and `fields`
+    (restorer, reader, threat_model, settings, notes) are added as given."""
     readable_outcomes = pooled(outcomes)
-    row = rows.row(kind, {**summarise(readable_outcomes), **timing}, attack=chain, restorer=restorer, reader=reader.name,
-                   threat_model=threat.value, settings=settings,
-                   notes={**ready.notes, LEARNS: _flag(ready.reader.learns or out.learns.get(restorer or "", False))})
+    row = rows.row(kind, {**summarise(readable_outcomes), **metrics}, attack=chain, **fields)
     plate_intervals(row, readable_outcomes)
     row.set_units(plate_units(outcomes))
-    chain_rows.append(row)
-    out.reader_plates.setdefault(reader.name, []).extend(
-        {"lens": target.lens_name, "attack": chain, "seed": row.seed, **o.__dict__} for o in outcomes)
+    return row
+
+
+def plate_records(target: Target, row: Row, outcomes: list[PlateOutcome]) -> list[dict]:
+    """The run's per-plate records (plates.csv) of one scored row."""
+    return [{"lens": target.lens_name, "attack": row.attack, "seed": row.seed, **o.__dict__} for o in outcomes]
 
 
 def read_sensor(target: Target, readers: Sequence[ReadyReader], cfg: RunConfig, rows: RowBuilder, out: Attacked
