@@ -49,18 +49,21 @@ def test_mask_formats_the_parser_offers_are_the_exporters():
 
 
 def test_run_help_names_exactly_the_standard_chains_and_the_attackers_that_run_by_default(capsys):
-    from benchmark.runner.defaults import STANDARD_ENSEMBLE
+    from benchmark.runner.defaults import CASCADE, STANDARD_ENSEMBLE, chain_parts
     with pytest.raises(SystemExit):
         cli.main(["run", "--help"])
     text = " ".join(capsys.readouterr().out.split()).replace("- ", "-")  # undo argparse's wrapping
     rows = cli.attacker_catalogue()
     default = [r["name"] for r in rows if r["runs_by_default"]]
     named = [r["name"] for r in rows if not r["runs_by_default"] and not r["standard_chains"]]
-    assert {"lpdr-craft", "ideal-observer"} <= set(named) and "identity" in default and "lpdr" not in named
+    assert "lpdr-craft" in named and "identity" in default and "lpdr" not in named
+    # The ideal observer runs by default only as the cascade, on the plates no other chain read.
+    assert "ideal-observer" not in named + default and CASCADE[0] in STANDARD_ENSEMBLE
     assert "default: the standard ensemble's chains (" + ", ".join(STANDARD_ENSEMBLE) + ")" in text
     assert "with --all-chains: " + ", ".join(default) + ", every reader after every restorer" in text
     assert "; run only when named: " + ", ".join(named) in text
-    assert all(r["standard_chains"] == [c for c in STANDARD_ENSEMBLE if r["name"] in c.split(">")] for r in rows)
+    assert all(r["standard_chains"] == [c for c in STANDARD_ENSEMBLE if r["name"] in chain_parts(c)] for r in rows)
+    assert next(r for r in rows if r["name"] == "ideal-observer")["standard_chains"] == list(CASCADE)
     assert "one long native call" in text  # --budget-s says what it cannot stop
 
 
@@ -85,7 +88,8 @@ def test_list_json_describes_every_lens_and_attacker(capsys):
 def test_list_text_shows_threat_model_and_default(capsys):
     assert cli.main(["list"]) == 0
     lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.startswith("  ")}
-    assert "lens-access" in lines["ideal-observer"] and " named " in lines["ideal-observer"]
+    assert "lens-access" in lines["ideal-observer"] and " standard " in lines["ideal-observer"]
+    assert "sensor-access" in lines["lpdr-craft"] and " named " in lines["lpdr-craft"]
     assert "sensor-access" in lines["identity"] and " all-chains " in lines["identity"]
     assert "lens-access" in lines["learned-reader"] and " standard " in lines["learned-reader"]
 

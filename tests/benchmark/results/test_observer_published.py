@@ -31,6 +31,22 @@ def reader_row(lens: str, attack: str, accuracy: float, n_plates: int, seed: int
                profile="quick", scenes="synthetic", metrics={"plate_acc": accuracy, "n_plates": float(n_plates)})
 
 
+def columns(text: str, row_start: str) -> dict[str, str]:
+    """The cells of the first table row starting with `row_start` in markdown `text`, by the header of
+    its table (the line above the table's |---| rule)."""
+    lines = text.splitlines()
+    at = next(i for i, x in enumerate(lines) if x.startswith(row_start))
+    rule = max(i for i in range(at) if lines[i].startswith("|-") or lines[i].startswith("| -"))
+    head = [c.strip() for c in lines[rule - 1].strip("|").split("|")]
+    cells = [c.strip() for c in lines[at].strip("|").split("|")]
+    assert len(head) == len(cells), (head, cells)
+    return dict(zip(head, cells))
+
+
+CEILING, TIGHTER = "ceiling % at 32 px (ideal observer, T=1)", "tighter ceiling % [95 %] at 32-48 px (T=1)"
+W5_T1, W5_T30 = "W_5% px (ideal observer, T=1)", "W_5% px (ideal observer, T=30)"
+
+
 def board(tmp_path: Path, spec: dict, accuracy: float, lens: str = "defocus", study: dict = STUDY) -> Path:
     """A leaderboard folder with `study` and one entry of `lens` (given spec) whose reader reads `accuracy`
     of 300 plates (two seeds)."""
@@ -71,9 +87,11 @@ def test_a_reader_above_the_ceiling_is_reported_in_the_readme_the_page_and_the_l
     assert "Ceiling violations" in page and 'class="violation"' in page and "answer-key" in page
     assert any("CEILING VIOLATION" in r.message and "answer-key" in r.message and r.levelno == logging.ERROR
                for r in caplog.records)
-    # The T = 30 column of a study without T = 30 reads "not computed"; the others show the study.
-    line = next(x for x in readme.splitlines() if x.startswith("| near-focus | quick"))
-    assert line.count("not computed") == 1
+    # The columns of what the study lacks (T = 30, the marginalised curve) read "not computed"; the
+    # others show the study.
+    cells = columns(readme, "| near-focus | quick")
+    assert [h for h, c in cells.items() if c == "not computed"] == [TIGHTER, W5_T30]
+    assert cells[CEILING] == f"{100 * study['lenses']['near-focus']['t1']['plate_ceiling_w32']:.1f}"
 
 
 def test_a_reader_below_the_ceiling_passes(tmp_path, caplog, near_focus):
@@ -91,9 +109,10 @@ def test_an_honest_reader_passes_and_the_columns_show_the_study(tmp_path, caplog
     readme = (directory / "README.md").read_text()
     assert "None: every reader" in readme.split("## Ceiling violations", 1)[1]
     t1 = STUDY["lenses"]["defocus"]["t1"]
-    line = next(x for x in readme.splitlines() if x.startswith("| defocus | quick"))
-    expected = f"| {100 * t1['plate_ceiling_w32']:.1f} | {t1['w5_plate_px']} | {STUDY['lenses']['defocus']['t30']['w5_plate_px']} |"
-    assert expected in line
+    cells = columns(readme, "| defocus | quick")
+    assert (cells[CEILING], cells[W5_T1], cells[W5_T30]) == (
+        f"{100 * t1['plate_ceiling_w32']:.1f}", str(t1["w5_plate_px"]), str(STUDY["lenses"]["defocus"]["t30"]["w5_plate_px"]))
+    assert cells[TIGHTER].endswith("]") and "not computed" not in cells.values()
 
 
 def test_another_spec_of_the_same_name_is_not_computed_and_not_checked(tmp_path, caplog):
@@ -109,8 +128,7 @@ def test_another_spec_of_the_same_name_is_not_computed_and_not_checked(tmp_path,
     line = [c.strip() for c in next(x for x in table if x.startswith("| defocus")).strip("|").split("|")]
     # The three ideal-observer columns and the attack gap (ceiling - ensemble) need the study's ceiling.
     assert [h for h, c in zip(head, line) if c == "not computed"] == [
-        "ceiling % at 32 px (ideal observer, T=1)", "W_5% px (ideal observer, T=1)", "W_5% px (ideal observer, T=30)",
-        "attack gap pt at 32 px (ceiling - ensemble)"]
+        CEILING, TIGHTER, W5_T1, W5_T30, "attack gap pt at 32 px (ceiling - ensemble)"]
 
 
 def test_specs_compare_by_value_not_description():
@@ -179,9 +197,10 @@ def test_the_smoke_entries_carry_the_study_columns():
     assert {e.lens for e in entries} == {"ideal", "defocus"}
     table = main_table(entries, STUDY)
     for lens in ("ideal", "defocus"):
-        line = next(x for x in table.splitlines() if x.startswith(f"| {lens} | smoke"))
-        w5 = STUDY["lenses"][lens]["t1"]["w5_plate_px"]
-        assert "not computed" not in line and f"| {100 * STUDY['lenses'][lens]['t1']['plate_ceiling_w32']:.1f} | {w5} |" in line
+        cells = columns(table, f"| {lens} | smoke")
+        t1 = STUDY["lenses"][lens]["t1"]
+        assert "not computed" not in cells.values()
+        assert (cells[CEILING], cells[W5_T1]) == (f"{100 * t1['plate_ceiling_w32']:.1f}", str(t1["w5_plate_px"]))
 
 
 def test_the_reader_study_checks_every_bin_against_the_ceiling(caplog, near_focus):
