@@ -191,6 +191,9 @@ def build_parser() -> argparse.ArgumentParser:
     ship.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
                      help="budget: %(choices)s (default: quick)")
     ship.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
+    ship.add_argument("--family", action="store_true",
+                      help="learned-reader only: its pre-training across the lens family, from the sharp start "
+                           "(resumable: the checkpoint is in the cache; run the command again to continue)")
     ship.add_argument("--out", type=Path, default=None, help="weights folder (default: the package's attacks/weights)")
     pub = sub.add_parser("publish", help="re-publish the leaderboard in one resumable run: every registered lens "
                                          "(or those named) at the profile's seeds, the standard ensemble")

@@ -11,15 +11,19 @@ over nine views of the box (``VIEWS``: a detector's box is never exact, and neit
 it reads the restorer's output the same way (it was trained on sensor images, so this is the weaker
 use of it).
 
-Fitting: the network starts from weights pre-trained on sharp plates (clean renders with white
-noise), shipped in the package (``attacks/weights/learned-reader-sharp-s0.*``, made by ``python -m
-benchmark pretrain-attacker learned-reader``), and is fine-tuned on the lens until its held-out
-accuracy flattens (``attacks.training.plate_reader_training``; the curve is kept with the weights and
-comes back in the ``FitReport`` of ``fit``, which says whether it stopped while still rising). Weights are cached per (lens, plate
-format, budget, pre-trained weights, fit seed: 0 by default, so a fixed lens is fitted once for every
-run seed). Without shipped weights for the plate format (another
-``--plate-format``), it pre-trains here first: the full pre-training for the quick and paper budgets, the
-budget's own small one for smoke and tiny.
+Fitting: the network starts from shipped weights: for the quick and paper profiles (``FAMILY_PROFILES``)
+the pre-training across the lens family (``attacks/weights/learned-reader-family-s0.*``, made by ``python
+-m benchmark pretrain-attacker learned-reader --family``, ``attacks.training.reader_family_training``),
+which reads lenses it never saw; it is evaluated on the lens first and fine-tuned briefly
+(``FAMILY_FINE_TUNE``), keeping the start unless the fine-tune beats it. Otherwise (smoke, tiny, or no
+family weights shipped) it starts from the pre-training on sharp plates (clean renders with white noise,
+``attacks/weights/learned-reader-sharp-s0.*``, ``python -m benchmark pretrain-attacker learned-reader``)
+and is fine-tuned on the lens (``BUDGETS``) until its held-out accuracy flattens
+(``attacks.training.plate_reader_training``). The curve is kept with the weights and comes back in the
+``FitReport`` of ``fit``, which says whether it stopped while still rising. Weights are cached per (lens,
+plate format, budget, start weights, fit seed: 0 by default, so a fixed lens is fitted once for every run
+seed). Without shipped weights for the plate format (another ``--plate-format``), it pre-trains on sharp
+plates here first: the full pre-training for the quick and paper budgets, the budget's own small one for smoke and tiny.
 """
 
 from __future__ import annotations
@@ -37,13 +41,16 @@ from torch import Tensor
 
 from attacks.base import FitContext, FitCurve as ReportedCurve, FitReport, PlateRead, ReadHints, Reader, ThreatModel
 from attacks.networks.plate_cnn import PlateCNN
+from attacks.training.lens_family import LensFamily
 from attacks.training.plate_reader_training import Camera, FitCurve, ReaderBudget, held_out_set, train_reader
+from attacks.training.reader_family_training import FAMILY_BUDGET
 from common.plate_render import PLATE_FORMAT, format_alphabets
 from attacks.readers.plates.plate_sim import plate_crops, psf_radius_px
 from attacks.training.restorer_training import lens_key
 from attacks.training.shipped_weights import Shipped, find_shipped, key_text
 
-__all__ = ["BUDGETS", "PRETRAIN_BUDGET", "LearnedReader", "pack_weights", "pretrain", "pretrained_key"]
+__all__ = ["BUDGETS", "FAMILY_FINE_TUNE", "FAMILY_PROFILES", "PRETRAIN_BUDGET", "LearnedReader", "family_key", "pack_weights", "pretrain", "pretrained_key",
+           "unpack_weights"]
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +70,22 @@ BUDGETS: dict[str, ReaderBudget] = {
     "paper": ReaderBudget(max_steps=6000, batch_size=64, lr=1e-3, widths_px=(8.0, 200.0), eval_every=200,
                           eval_plates=128, patience=5, bands_per_batch=4),
 }
-"""Fine-tuning budget per ``AttackBudget.profile`` (one for each of ``attacks.base.BUDGET_PROFILES``)."""
+"""Fine-tuning budget per ``AttackBudget.profile`` (one for each of ``attacks.base.BUDGET_PROFILES``), from the
+sharp start."""
+
+FAMILY_PROFILES = ("quick", "paper")
+"""The profiles whose fits start from the family pre-training when the package ships it; smoke and tiny keep
+the sharp start and its budgets (a pipeline check, and what the published smoke entries were measured with)."""
+
+FAMILY_FINE_TUNE: dict[str, ReaderBudget] = {
+    "quick": ReaderBudget(max_steps=600, batch_size=48, lr=5e-4, widths_px=(8.0, 200.0), eval_every=100,
+                          eval_plates=32, patience=2, bands_per_batch=4, eval_start=True),
+    "paper": ReaderBudget(max_steps=3000, batch_size=64, lr=5e-4, widths_px=(8.0, 200.0), eval_every=200,
+                          eval_plates=128, patience=4, bands_per_batch=4, eval_start=True),
+}
+"""Fine-tuning budget from the family start: the start is evaluated on the lens first and kept unless the
+fine-tune beats it; the fit stops once ``patience`` evaluations gain under ``min_gain`` (the gain no longer
+pays for its seconds)."""
 
 VIEWS: tuple[tuple[float, float, float], ...] = (
     (0.0, 0.0, 1.0), (0.02, 0.0, 1.0), (-0.02, 0.0, 1.0), (0.0, 0.0, 1.04), (0.0, 0.0, 0.96),
@@ -81,13 +103,21 @@ def pretrained_key(fmt: str, seed: int = 0) -> dict[str, Any]:
             "budget": PRETRAIN_BUDGET.to_dict(), "seed": seed}
 
 
+def family_key(fmt: str, seed: int = 0) -> dict[str, Any]:
+    """The key the family pre-training is shipped (and looked up) under: it continues the sharp start."""
+    return {"attack": LearnedReader.name, "stage": "pretrained-family", "format": fmt, "width": WIDTH,
+            "budget": FAMILY_BUDGET.to_dict(), "family": LensFamily().describe(), "start": pretrained_key(fmt, seed),
+            "seed": seed}
+
+
 def pack_weights(net: PlateCNN, curve: FitCurve) -> bytes:
     state = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
     state[_CURVE] = torch.frombuffer(bytearray(json.dumps(curve.to_dict()).encode()), dtype=torch.uint8).clone()
     return save_safetensors(state, metadata={"kind": LearnedReader.name})
 
 
-def _unpack(net: PlateCNN, data: bytes) -> FitCurve | None:
+def unpack_weights(net: PlateCNN, data: bytes) -> FitCurve | None:
+    """Load `pack_weights` bytes into ``net`` (strictly: every tensor, no other); the curve they carry, if any."""
     state = load_safetensors(data)
     curve = state.pop(_CURVE, None)
     net.load_state_dict(state, strict=True)
@@ -159,13 +189,13 @@ class LearnedReader(Reader):
         self.plate_format = ctx.plate_format
         lens: Any = ctx.lens
         profile = ctx.budget.profile
-        self.budget = BUDGETS[profile]
         # Without shipped weights a smoke or tiny budget starts from its own small pre-training: the full
         # one takes tens of minutes on 2 cores.
         seed = ctx.seed if self.fit_seed is None else self.fit_seed
-        pretrain_budget = self.budget if profile in ("tiny", "smoke") else PRETRAIN_BUDGET
+        pretrain_budget = BUDGETS[profile] if profile in ("tiny", "smoke") else PRETRAIN_BUDGET
         t0 = time.perf_counter()
-        net, start = self._start(seed, pretrain_budget)
+        net, start = self._start(seed, pretrain_budget, family=profile in FAMILY_PROFILES)
+        self.budget = FAMILY_FINE_TUNE[profile] if "family" in start else BUDGETS[profile]
         seconds = {"start": time.perf_counter() - t0}
         if lens is None:  # the sharp scenes themselves: the start was trained on sharp plates, read with it
             self.spread_px, self.budget, self.trained = 0.0, None, False
@@ -182,14 +212,15 @@ class LearnedReader(Reader):
             data = None if self.shipped_fit is None else self.shipped_fit.data
         if data is not None:
             try:
-                self.curve, self.trained = _unpack(net, data), False
+                self.curve, self.trained = unpack_weights(net, data), False
             except (SafetensorError, RuntimeError, KeyError, ValueError) as exc:
                 where = ("the shipped fit " + self.shipped_fit.path.name if self.shipped_fit is not None
                          else f"the cached weights of key {key_text(key)[:120]}")
                 log.warning("%s: %s do not load (%s: %s); fitting again and storing the new fit", self.name, where,
                             type(exc).__name__, exc)
                 data, self.shipped_fit = None, None
-                net, _ = self._start(seed, pretrain_budget)  # a failed load may have overwritten some weights
+                # A failed load may have overwritten some weights.
+                net, _ = self._start(seed, pretrain_budget, family=profile in FAMILY_PROFILES)
         if data is None:
             camera = self._camera(ctx)
             held_out = held_out_set(camera, self.budget, self.spread_px, half, self.plate_format, seed)
@@ -212,15 +243,20 @@ class LearnedReader(Reader):
                               self.curve.stopped, self.curve.steps[self.curve.kept])
         return FitReport(curve=curve, still_rising=self.curve.still_rising, stage_seconds=seconds)
 
-    def _start(self, seed: int, pretrain_budget: ReaderBudget) -> tuple[PlateCNN, dict[str, Any]]:
-        """The network to fine-tune and what it started from: the shipped pre-trained weights for the
-        plate format, else a fresh network pre-trained here on sharp plates (seeded, ``pretrain_budget``)."""
+    def _start(self, seed: int, pretrain_budget: ReaderBudget, family: bool) -> tuple[PlateCNN, dict[str, Any]]:
+        """The network to fine-tune and what it started from: with ``family``, the shipped family
+        pre-training for the plate format (its key holds "family"); else, or without it, the shipped
+        sharp pre-training; else a fresh network pre-trained here on sharp plates (seeded, ``pretrain_budget``)."""
         net = self.build(self.plate_format, seed)
-        shipped = find_shipped(self.name, pretrained_key(self.plate_format)) if self.use_shipped else None
-        if shipped is not None:
-            _unpack(net, shipped.data)
-            self.shipped = shipped
-            return net, {"shipped": shipped.path.name, "sha256": shipped.provenance["sha256"]}
+        keys = ([("family", family_key(self.plate_format))] if family else []) + [
+            ("sharp", pretrained_key(self.plate_format))]
+        for kind, key in keys if self.use_shipped else []:
+            shipped = find_shipped(self.name, key)
+            if shipped is not None:
+                unpack_weights(net, shipped.data)
+                self.shipped = shipped
+                start = {"shipped": shipped.path.name, "sha256": shipped.provenance["sha256"]}
+                return net, ({"family": True, **start} if kind == "family" else start)
         curve = pretrain(net, self.plate_format, seed, pretrain_budget)
         return net, {"pretrained_here": {**pretrained_key(self.plate_format, seed), "budget": pretrain_budget.to_dict()},
                      "held_out": curve.accuracy[curve.kept:][:1]}

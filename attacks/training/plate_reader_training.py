@@ -44,7 +44,7 @@ from tqdm.auto import tqdm
 from attacks.networks.plate_cnn import PlateCNN
 from attacks.readers.plates.plate_sim import PlateBatch, simulate_plates
 
-__all__ = ["EVAL_WIDTHS_PX", "FitCurve", "ReaderBudget", "held_out_set", "plate_accuracy", "train_reader",
+__all__ = ["EVAL_WIDTHS_PX", "FitCurve", "ReaderBudget", "held_out_set", "plate_accuracy", "slot_loss", "train_reader",
            "training_batch", "width_bands"]
 
 log = logging.getLogger(__name__)
@@ -70,6 +70,8 @@ class ReaderBudget:
         min_gain: The gain in mean held-out accuracy (a fraction) that counts as still improving.
         min_steps: Steps before which the fit never stops as flattened.
         bands_per_batch: Log-spaced width bands every batch draws an equal part from (module docstring).
+        eval_start: Evaluate the start before the first step too, so the fit may keep it (a start that
+            already reads the lens: a fine-tune that does not beat it costs its seconds and changes nothing).
     """
 
     max_steps: int
@@ -82,6 +84,7 @@ class ReaderBudget:
     min_gain: float = 0.01
     min_steps: int = 0
     bands_per_batch: int = 1
+    eval_start: bool = False
 
     def __post_init__(self) -> None:
         if not 1 <= self.bands_per_batch <= self.batch_size:
@@ -89,13 +92,15 @@ class ReaderBudget:
                              f"({self.batch_size}), each band gets at least one plate")
 
     def to_dict(self) -> dict[str, Any]:
-        """The fields (``min_steps`` and ``bands_per_batch`` only when not their defaults: the keys of fits
-        made before them stay valid)."""
+        """The fields (``min_steps``, ``bands_per_batch`` and ``eval_start`` only when not their defaults:
+        the keys of fits made before them stay valid)."""
         d = dataclasses.asdict(self)
         if not d["min_steps"]:
             del d["min_steps"]
         if d["bands_per_batch"] == 1:
             del d["bands_per_batch"]
+        if not d["eval_start"]:
+            del d["eval_start"]
         return d
 
 
@@ -152,7 +157,8 @@ def plate_accuracy(net: nn.Module, batch: PlateBatch) -> float:
     return float((predicted == batch.labels).all(dim=1).float().mean())
 
 
-def _loss(logits: list[Tensor], labels: Tensor, criterion: nn.Module) -> Tensor:
+def slot_loss(logits: list[Tensor], labels: Tensor, criterion: nn.Module) -> Tensor:
+    """The mean over character slots of `criterion` (per-slot logits against the slots' class indices)."""
     return sum((criterion(slot, labels[:, i]) for i, slot in enumerate(logits)), torch.zeros(())) / len(logits)
 
 
@@ -177,26 +183,33 @@ def _train(net: PlateCNN, cameras: list[Camera | None], budget: ReaderBudget, sp
     curve = FitCurve([], [], [], "budget", False, 0.0)
     best: dict[str, Tensor] | None = None  # the weights of the best evaluation so far
     t0 = time.perf_counter()
+
+    def evaluate(step: int) -> None:
+        nonlocal best
+        per_width = {w: plate_accuracy(net, b) for w, b in held_out.items()}
+        curve.steps.append(step)
+        curve.per_width.append(per_width)
+        curve.accuracy.append(float(np.mean(list(per_width.values()))) if per_width else 0.0)
+        if best is None or curve.accuracy[-1] > max(curve.accuracy[:-1]):
+            best = {k: v.detach().clone() for k, v in net.state_dict().items()}
+            curve.best_step = step
+        log.info("plate reader step %d: held-out %.3f (%.0f s)", step, curve.accuracy[-1], time.perf_counter() - t0)
+
+    if budget.eval_start:
+        evaluate(0)
     net.train()
     bar = tqdm(range(budget.max_steps), desc="plate reader fit", unit="step", leave=False)
     for step in bar:
         crops, labels = training_batch(cameras[step % len(cameras)], budget, rng, generator, spread_px, fmt,
                                        psf_half_px)
-        loss = _loss(net(crops), labels, criterion)
+        loss = slot_loss(net(crops), labels, criterion)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
         schedule.step()
         if (step + 1) % budget.eval_every == 0 or step + 1 == budget.max_steps:
-            per_width = {w: plate_accuracy(net, b) for w, b in held_out.items()}
-            curve.steps.append(step + 1)
-            curve.per_width.append(per_width)
-            curve.accuracy.append(float(np.mean(list(per_width.values()))) if per_width else 0.0)
+            evaluate(step + 1)
             bar.set_postfix(held_out=f"{curve.accuracy[-1]:.3f}")
-            if best is None or curve.accuracy[-1] > max(curve.accuracy[:-1]):
-                best = {k: v.detach().clone() for k, v in net.state_dict().items()}
-                curve.best_step = step + 1
-            log.info("plate reader step %d: held-out %.3f (%.0f s)", step + 1, curve.accuracy[-1], time.perf_counter() - t0)
             if step + 1 >= budget.min_steps and _flattened(curve.accuracy, budget):
                 curve.stopped = "flattened"
                 break

@@ -24,14 +24,15 @@ from safetensors.torch import save as save_safetensors
 import lenses
 from attacks.training.degradations import degrade
 from attacks.restorers.gray_world import gray_world_balance
-from attacks.readers.learned_reader import LearnedReader, pack_weights, pretrain, pretrained_key
+from attacks.readers.learned_reader import LearnedReader, family_key, pack_weights, pretrain, pretrained_key, unpack_weights
+from attacks.training.reader_family_training import pretrain_family
 from common.plate_render import PLATE_FORMAT
 from attacks.restorers.nafnet_generic import NafnetGeneric
 from attacks.restorers.nafnet_known_psf import PRETRAIN_SEED, SHIPPED_SCENES, NafnetKnownPSF, pack, shipped_key
 from attacks.training.psf_restorer_training import PSF_BUDGETS
 from attacks.training.psf_restorer_training import pretrain as pretrain_known_psf
 from attacks.training.restorer_training import collect_pairs, data_identity
-from attacks.training.shipped_weights import write_shipped
+from attacks.training.shipped_weights import find_shipped, write_shipped
 from benchmark.store.cache import cache_root
 from benchmark.results.metrics import psnr
 from benchmark.store.profiles import Profile, get_profile
@@ -83,6 +84,31 @@ def ship_reader(args: argparse.Namespace) -> int:
     return 0
 
 
+def ship_reader_family(args: argparse.Namespace) -> int:
+    """Pre-train ``learned-reader`` across the lens family from the shipped sharp start and ship it with
+    its held-out curve (``attacks.training.reader_family_training``). Resumable: the checkpoint after every
+    evaluation is in the cache (``<cache>/pretrain/learned-reader-family-s<seed>.pt``)."""
+    sharp = find_shipped(LearnedReader.name, pretrained_key(PLATE_FORMAT, args.seed))
+    if sharp is None:
+        raise SystemExit(f"error: the family pre-training continues the sharp start, and the package ships none for "
+                         f"seed {args.seed}; make it first: python -m benchmark pretrain-attacker learned-reader "
+                         f"--seed {args.seed}")
+    net = LearnedReader.build(PLATE_FORMAT, args.seed)
+    unpack_weights(net, sharp.data)
+    checkpoint = cache_root() / "pretrain" / f"learned-reader-family-s{args.seed}.pt"
+    curve, held_out = pretrain_family(net, PLATE_FORMAT, args.seed, checkpoint=checkpoint, progress=print)
+    made = {"commit": git_commit(), "command": f"python -m benchmark pretrain-attacker learned-reader --family --seed {args.seed}",
+            "seed": args.seed, "fit_s": curve.seconds, "threads": torch.get_num_threads(),
+            "packages": package_versions(), "curve": curve.to_dict(), "heldout_lenses": held_out,
+            "start": sharp.describe()}
+    path = write_shipped(f"learned-reader-family-s{args.seed}", LearnedReader.name, family_key(PLATE_FORMAT, args.seed),
+                         pack_weights(net, curve), made, args.out)
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB) and its provenance; held-out exact-plate accuracy "
+          f"{curve.accuracy[curve.kept]:.3f} (start {curve.accuracy[0]:.3f}) at step {curve.best_step} of "
+          f"{curve.steps[-1]} ({curve.stopped}{', still rising' if curve.still_rising else ''})")
+    return 0
+
+
 def ship_known_psf(args: argparse.Namespace) -> int:
     """Pre-train ``nafnet-known-psf`` across the lens family on the scenes ``SHIPPED_SCENES`` names and ship
     it with its held-out curve. Resumable: the checkpoint after every evaluation is in the cache
@@ -108,8 +134,10 @@ def ship_known_psf(args: argparse.Namespace) -> int:
 
 def main(args: argparse.Namespace) -> int:
     """`python -m benchmark pretrain-attacker` (arguments from `benchmark.cli`): fit or load, then ship."""
+    if getattr(args, "family", False) and args.attacker != "learned-reader":
+        raise SystemExit(f"error: --family is a pre-training of learned-reader, not of {args.attacker}")
     if args.attacker == "learned-reader":
-        return ship_reader(args)
+        return ship_reader_family(args) if getattr(args, "family", False) else ship_reader(args)
     if args.attacker == "nafnet-known-psf":
         return ship_known_psf(args)
     profile = get_profile(args.profile)

@@ -125,8 +125,8 @@ def shipped_net():
     assert shipped is not None, "the package ships learned-reader's pre-trained weights (pretrain-attacker learned-reader)"
     reader = LearnedReader()
     net = reader.build(PLATE_FORMAT, 0)
-    from attacks.readers.learned_reader import _unpack
-    curve = _unpack(net, shipped.data)
+    from attacks.readers.learned_reader import unpack_weights
+    curve = unpack_weights(net, shipped.data)
     return net.eval(), curve, shipped
 
 

@@ -1,0 +1,211 @@
+"""Pre-training of ``learned-reader`` across the lens family, once, so it reads a lens it never saw.
+
+The start of every lens's fit. It continues from the sharp-plate start (``learned-reader-sharp-s0``:
+glyphs, no lens) and trains on plates simulated through lenses drawn from ``LensFamily`` (the co-design
+box and the out-of-focus lenses), one lens a step: the step's lens, its crops cut with that lens's PSF
+spread (``psf_radius_px``: the margin the crop holds grows with the blur, which is how the PSF reaches
+the network), and the batch split over width bands as the per-lens fits do (``training_batch``).
+Every draw (lens, plates, noise, dropout) is a function of (seed, step), so a run resumed from its checkpoint
+continues exactly.
+
+Held out: ``heldout_lenses`` lenses drawn from the same family with another seed stream (not drawn in
+training), ``eval_plates`` plates each per width bin of ``EVAL_WIDTHS_PX`` (true boxes); the score is
+the mean exact-plate accuracy over lenses and bins. Evaluated at the start and every ``eval_every``
+steps; the fit stops "flattened" when the last ``patience`` evaluations gained less than ``min_gain``
+over the best before them (never before ``min_steps``), else at ``max_steps`` ("budget", with
+``still_rising`` when the last window still gained). The weights of the best evaluation are kept.
+
+Recipe: the per-lens fits' (``attacks.training.plate_reader_training``): per-slot cross-entropy with
+label smoothing 0.05, AdamW (weight decay 1e-4), a tenth of the steps warm-up, then cosine.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+from tqdm.auto import tqdm
+
+from attacks.networks.plate_cnn import PlateCNN
+from attacks.readers.plates.plate_sim import PlateBatch, psf_radius_px
+from attacks.training.lens_family import FamilyLens, LensFamily
+from attacks.training.plate_reader_training import (
+    FitCurve, ReaderBudget, held_out_set, plate_accuracy, slot_loss, training_batch)
+
+__all__ = ["FAMILY_BUDGET", "FamilyCamera", "family_camera", "family_held_out", "pretrain_family"]
+
+log = logging.getLogger(__name__)
+
+HELDOUT_SEED_OFFSET = 2_000_003  # the held-out lenses' stream (seed, this, i); training draws are (seed, step)
+
+
+@dataclasses.dataclass(frozen=True)
+class FamilyBudget:
+    """The family pre-training's size: a ``ReaderBudget`` for the steps, plus the held-out lenses."""
+
+    steps: ReaderBudget
+    heldout_lenses: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**self.steps.to_dict(), "heldout_lenses": self.heldout_lenses}
+
+
+FAMILY_BUDGET = FamilyBudget(
+    ReaderBudget(max_steps=12000, batch_size=48, lr=1e-3, widths_px=(8.0, 200.0), eval_every=500, eval_plates=32,
+                 patience=4, min_gain=0.005, min_steps=3000, bands_per_batch=4),
+    heldout_lenses=6)
+"""The shipped pre-training (``python -m benchmark pretrain-attacker learned-reader --family``)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class FamilyCamera:
+    """One drawn lens as the reader's training sees it: its camera and the PSF facts a crop needs."""
+
+    drawn: FamilyLens
+    camera: Callable[[Tensor, torch.Generator], Tensor]
+    spread_px: float
+    psf_half_px: int
+
+
+def family_camera(family: LensFamily, drawn: FamilyLens) -> FamilyCamera:
+    """The camera of a drawn lens (CPU; the mask lens is shared, so use it before the next draw)."""
+    lens = family.build(drawn)
+    with torch.no_grad():
+        psf = lens.psf().detach().cpu()
+
+    def camera(x: Tensor, generator: torch.Generator) -> Tensor:
+        with torch.no_grad():
+            return lens(x, generator=generator)
+    return FamilyCamera(drawn, camera, psf_radius_px(psf), psf.shape[-1] // 2)
+
+
+def _generator(*parts: int) -> torch.Generator:
+    return torch.Generator().manual_seed(int(np.random.SeedSequence(list(parts)).generate_state(1, np.uint64)[0] >> 1))
+
+
+def family_held_out(family: LensFamily, budget: FamilyBudget, fmt: str, seed: int
+                    ) -> list[tuple[FamilyLens, dict[int, PlateBatch]]]:
+    """The fixed held-out sets: per held-out lens (another seed stream), its plates per width bin."""
+    out = []
+    for i in range(budget.heldout_lenses):
+        through = family_camera(family, family.draw(_generator(seed, HELDOUT_SEED_OFFSET, i)))
+        out.append((through.drawn, held_out_set(through.camera, budget.steps, through.spread_px, through.psf_half_px,
+                                                fmt, seed + 101 * (i + 1))))
+    return out
+
+
+def _evaluate(net: nn.Module, held_out: list[tuple[FamilyLens, dict[int, PlateBatch]]]) -> dict[int, float]:
+    """Per width bin, the mean over the held-out lenses of the exact-plate accuracy."""
+    widths = sorted(held_out[0][1]) if held_out else []
+    return {w: float(np.mean([plate_accuracy(net, sets[w]) for _, sets in held_out])) for w in widths}
+
+
+def pretrain_family(net: PlateCNN, fmt: str, seed: int, budget: FamilyBudget = FAMILY_BUDGET,
+                    checkpoint: Path | None = None, family: LensFamily | None = None,
+                    progress: Callable[[str], None] | None = None) -> tuple[FitCurve, list[dict[str, Any]]]:
+    """Train ``net`` (the sharp start, in place) across the lens family (module docs).
+
+    Args:
+        net: The reader to train; it ends on the weights of its best held-out evaluation, in eval mode.
+        fmt: Plate format.
+        seed: Seeds every draw (the network's own initialisation is the caller's).
+        budget: Steps, batch and held-out size.
+        checkpoint: A file to resume from and to write after every evaluation (``torch.save`` of tensors
+            and plain values, read back with ``weights_only=True``); None keeps nothing.
+        family: The lens family (default ``LensFamily()``).
+        progress: Called with one line per evaluation (besides the log).
+
+    Returns:
+        The held-out curve (mean over the held-out lenses per bin) and the held-out lenses' descriptions.
+    """
+    with torch.random.fork_rng(devices=[]):  # the global generator (dropout) is seeded per step, then restored
+        return _pretrain(net, fmt, seed, budget, checkpoint, family or LensFamily(), progress)
+
+
+def _pretrain(net: PlateCNN, fmt: str, seed: int, budget: FamilyBudget, checkpoint: Path | None, family: LensFamily,
+              progress: Callable[[str], None] | None) -> tuple[FitCurve, list[dict[str, Any]]]:
+    steps = budget.steps
+    optimizer = torch.optim.AdamW(net.parameters(), lr=steps.lr, weight_decay=1e-4)
+    warmup, total = max(1, steps.max_steps // 10), max(steps.max_steps, 1)
+    schedule = torch.optim.lr_scheduler.LambdaLR(
+        optimizer, lambda s: min(1.0, (s + 1) / warmup) * 0.5 * (1.0 + math.cos(math.pi * min(s, total) / total)))
+    criterion = nn.CrossEntropyLoss(label_smoothing=0.05)
+    held_out = family_held_out(family, budget, fmt, seed)
+    described = [d.describe() for d, _ in held_out]
+    curve, best, start = FitCurve([], [], [], "budget", False, 0.0), None, 0
+    if checkpoint is not None and checkpoint.exists():
+        saved = torch.load(checkpoint, weights_only=True)
+        net.load_state_dict(saved["net"])
+        optimizer.load_state_dict(saved["optimizer"])
+        schedule.load_state_dict(saved["schedule"])
+        curve, best, start = FitCurve.from_dict(saved["curve"]), saved["best"], int(saved["step"])
+        log.info("learned-reader family pre-training resumed at step %d from %s", start, checkpoint)
+
+    def evaluate(step: int) -> bool:
+        nonlocal best
+        per_width = _evaluate(net, held_out)
+        curve.steps.append(step)
+        curve.per_width.append(per_width)
+        curve.accuracy.append(float(np.mean(list(per_width.values()))))
+        if best is None or curve.accuracy[-1] > max(curve.accuracy[:-1]):
+            best, curve.best_step = {k: v.detach().clone() for k, v in net.state_dict().items()}, step
+        curve.seconds = round(time.perf_counter() - t0, 1)
+        flat = step >= steps.min_steps and len(curve.accuracy) > steps.patience and (
+            max(curve.accuracy[-steps.patience:]) - max(curve.accuracy[:-steps.patience]) < steps.min_gain)
+        line = (f"step {step}/{steps.max_steps}: held-out {curve.accuracy[-1]:.3f} ("
+                + ", ".join(f"{w} px {a:.2f}" for w, a in per_width.items()) + f"), {curve.seconds:.0f} s")
+        if checkpoint is not None:
+            checkpoint.parent.mkdir(parents=True, exist_ok=True)
+            tmp = checkpoint.with_suffix(".tmp")
+            torch.save({"net": net.state_dict(), "optimizer": optimizer.state_dict(), "schedule": schedule.state_dict(),
+                        "curve": curve.to_dict(), "best": best, "step": step}, tmp)
+            tmp.replace(checkpoint)
+        log.info("learned-reader family pre-training %s", line)
+        if progress is not None:
+            progress(line)
+        return flat
+
+    t0 = time.perf_counter() - curve.seconds
+    flat = False
+    if start == 0:
+        flat = evaluate(0)  # the sharp start, zero-shot on the held-out lenses
+    net.train()
+    bar = tqdm(range(start, steps.max_steps), desc="learned-reader family pre-training", unit="step", initial=start,
+               total=steps.max_steps, leave=False)
+    for step in bar:
+        if flat:
+            curve.stopped = "flattened"
+            break
+        g = _generator(seed, step)
+        torch.manual_seed(int(torch.randint(0, 2**62, (1,), generator=_generator(seed, step, 2))))  # dropout's draws
+        through = family_camera(family, family.draw(g))
+        rng = np.random.default_rng([seed, step, 1])
+        crops, labels = training_batch(through.camera, steps, rng, g, through.spread_px, fmt, through.psf_half_px)
+        loss = slot_loss(net(crops), labels, criterion)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+        schedule.step()
+        bar.set_postfix(loss=f"{loss.item():.3f}")
+        if (step + 1) % steps.eval_every == 0 or step + 1 == steps.max_steps:
+            flat = evaluate(step + 1)
+            net.train()
+            if flat:
+                curve.stopped = "flattened"
+                break
+    bar.close()
+    window = curve.accuracy[-steps.patience:]
+    curve.still_rising = curve.stopped == "budget" and len(curve.accuracy) > steps.patience and (
+        max(window) - max(curve.accuracy[:-steps.patience]) >= steps.min_gain)
+    if best is not None:
+        net.load_state_dict(best)
+    net.eval()
+    return curve, described
