@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import logging
+import secrets
 import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -169,7 +170,8 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         device: str = "cpu", out: str | Path | None = None, executor: str = "local",
         plate_format: str | None = None, frames: int = 30, budget_s: float | None = None,
         all_chains: bool = False, meta: Mapping[str, Any] | None = None,
-        on_task: Callable[[Task], None] | None = None) -> Results:
+        on_task: Callable[[Task], None] | None = None, sealed: bool = False,
+        scene_seeds: Mapping[int, int] | None = None) -> Results:
     """Benchmark `lenses` against `attacks`; the CLI's `run` with the same meanings.
 
     Args:
@@ -193,6 +195,12 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         meta: Extra facts stored in results.json's meta (the CLI stores its command line).
         on_task: Called with each task (`benchmark.runner.planning.Task`) as it completes, computed or
             found in the cache (a progress bar's hook; `publish` uses it).
+        sealed: Draw each seed's val scenes from a random seed (``secrets``) that no attacker is given
+            (their fit contexts hold the run seed): a plugin cannot rebuild the test scenes from the
+            public generator. The scene seeds go into the results' meta (``scene_seeds``) after the
+            attackers ran; `scene_seeds` re-runs them.
+        scene_seeds: The val scene seed of each run seed (a sealed run's, to reproduce it); None: the
+            run seeds themselves (or random ones with `sealed`).
 
     Returns:
         `Results`; `Results.table()` is the DataFrame.
@@ -207,6 +215,7 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         raise TypeError(f"out must be a folder path (str or pathlib.Path) or None, got {type(out).__name__} {out!r}")
     cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames,
                                 budget_s, all_chains)
+    cfg.scene_seeds = _scene_seeds(cfg.seeds, sealed, scene_seeds)
     folder, created = prepare_out(Path(out)) if out is not None else (None, False)
     log.info("profile %s: %s", cfg.profile.name, cfg.profile.to_dict())
     t0 = time.perf_counter()
@@ -219,6 +228,8 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         raise
     run_meta = {**(meta or {}), "profile": cfg.profile.to_dict(), "executor": executor,
                 "wall_s": time.perf_counter() - t0}
+    if cfg.scene_seeds:  # written only now, after every attacker ran
+        run_meta.update(sealed=bool(sealed), scene_seeds={str(k): v for k, v in sorted(cfg.scene_seeds.items())})
     output.rows = fail_above_ceiling(output.rows, run_violations(output.plates, output.lens_info, load_study())["violations"])
     output.failed = [r for r in output.rows if not r.ok]
     results = Results(output.rows, output.settings, run_meta, folder, output)
@@ -524,6 +535,28 @@ def plan(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = N
 
 
 # ---- argument checks ------------------------------------------------------------------------------
+
+SCENE_SEED_BITS = 62  # a sealed run's scene seeds lie in [0, 2**62): too many to try one by one
+
+
+def _scene_seeds(seeds: list[int], sealed: bool, given: Mapping[int, int] | None) -> dict[int, int]:
+    """The val scene seed of each run seed: `given` (checked), random ones when `sealed`, else none."""
+    if not isinstance(sealed, bool):
+        raise TypeError(f"sealed must be True or False, got {sealed!r}")
+    if given is None:
+        return {s: secrets.randbits(SCENE_SEED_BITS) for s in seeds} if sealed else {}
+    if sealed:
+        raise ValueError("sealed draws new scene seeds and scene_seeds gives them: pass one of the two "
+                         "(scene_seeds re-runs a sealed run)")
+    chosen = dict(given)
+    if set(chosen) != set(seeds):
+        raise ValueError(f"scene_seeds must give one scene seed for each run seed {sorted(seeds)}, got "
+                         f"{sorted(chosen)}")
+    for seed, value in chosen.items():
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2 ** 63:
+            raise ValueError(f"scene_seeds[{seed}] must be an integer in 0 .. 2**63 - 1, got {value!r}")
+    return chosen
+
 
 def _profile(profile: str | Profile) -> Profile:
     return profile if isinstance(profile, Profile) else get_profile(profile)

@@ -99,6 +99,21 @@ def _seeds(text: str) -> list[int]:
     return seeds
 
 
+def _scene_seeds(text: str) -> dict[int, int]:
+    """--scene-seeds RUN=SCENE,...: a sealed run's scene seeds (its results' meta "scene_seeds")."""
+    out: dict[int, int] = {}
+    for part in text.split(","):
+        run_seed, sep, scene_seed = part.strip().partition("=")
+        try:
+            if not sep:
+                raise ValueError
+            out[int(run_seed)] = int(scene_seed)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"--scene-seeds takes RUN_SEED=SCENE_SEED pairs like 0=12345,1=678 "
+                                             f"(a sealed run's meta \"scene_seeds\"), got {part.strip()!r}") from None
+    return out
+
+
 def _plate_format(text: str) -> str:
     if not text or set(text) - {"L", "D"}:
         raise argparse.ArgumentTypeError(f"--plate-format takes L (letter) and D (digit) only, like LLDDDDD, "
@@ -145,6 +160,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
                      help="run size: %(choices)s (default: quick)")
     run.add_argument("--seeds", type=_seeds, default=[0], help="comma-separated seeds, e.g. 0,1,2 (default 0)")
+    run.add_argument("--sealed", action="store_true",
+                     help="draw the val scenes of each seed from a random seed no attacker is given, written with "
+                          "the results after the attackers ran (for plugins not shipped with the suite: one "
+                          "cannot rebuild the test scenes beforehand); not publishable")
+    run.add_argument("--scene-seeds", type=_scene_seeds, default=None, metavar="RUN=SCENE,...",
+                     help="re-run a sealed run: its scene seeds (results.json meta \"scene_seeds\")")
     run.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
     run.add_argument("--out", type=Path, default=None, help="output folder (default runs/<date-time>)")
     run.add_argument("--executor", default="local", metavar="local|ray|ray://HOST:PORT",
@@ -409,7 +430,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                                    trace_python=args.profile_python_memory)
                 if args.profile_time else contextlib.nullcontext())
     with profiled:
-        results = api.run(**options, out=out, meta={"command": sys.argv})
+        results = api.run(**options, out=out, meta={"command": sys.argv}, sealed=args.sealed,
+                          scene_seeds=args.scene_seeds)
     print((out / "table.md").read_text())
     if args.publish:
         from benchmark.publish import leaderboard
@@ -580,6 +602,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "run" and args.all_chains and args.attack:
         parser.error("--all-chains widens the default attackers; with --attack the run is exactly the attackers "
                      "named (every reader after every restorer): drop one of them")
+    if args.command == "run" and (args.sealed or args.scene_seeds) and (args.publish or args.dry_run):
+        parser.error(("--sealed" if args.sealed else "--scene-seeds") + " runs scenes other than the seeds' own: "
+                     + ("a leaderboard entry is reproduced from its seeds, so it cannot be published (--publish)"
+                        if args.publish else "no task of it is cached, there is nothing to plan (--dry-run)"))
     if args.command == "run" and args.dry_run and (args.profile_time or args.publish):
         parser.error("--dry-run computes nothing, so there is nothing to " +
                      ("profile (--profile-time)" if args.profile_time else "publish (--publish)") + "; drop one of them")

@@ -59,8 +59,8 @@ class FamilyBudget:
 
 
 FAMILY_BUDGET = FamilyBudget(
-    ReaderBudget(max_steps=12000, batch_size=48, lr=1e-3, widths_px=(8.0, 200.0), eval_every=500, eval_plates=32,
-                 patience=4, min_gain=0.005, min_steps=3000, bands_per_batch=4),
+    ReaderBudget(max_steps=6000, batch_size=48, lr=1e-3, widths_px=(8.0, 200.0), eval_every=500, eval_plates=32,
+                 patience=3, min_gain=0.005, min_steps=2000, bands_per_batch=4),
     heldout_lenses=6)
 """The shipped pre-training (``python -m benchmark pretrain-attacker learned-reader --family``)."""
 

@@ -77,7 +77,7 @@ def run_cascade(target: Target, ready: ReadyReader, cfg: RunConfig, rows: RowBui
     if pick:
         result = attempt(reader.name, "read", lambda: read_plates(
             reader, [plates.sensor[i] for i in pick], [plates.scenes[i] for i in pick], cfg.profile.batch_size,
-            cfg.device, target.segment_sensor), cfg.budget_s)
+            cfg.device, target.segment_sensor), cfg.budget_s, target.ctx.cache_dir)
         if isinstance(result, RowError):
             out.rows.append(rows.failed("reader", chain, result, reader=reader.name, settings=settings))
             return

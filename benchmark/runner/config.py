@@ -36,6 +36,13 @@ class RunConfig:
     # Lenses given as spec files, by the name the run knows them by (the spec's `name`); a task of
     # such a lens is keyed by its digest too, so an edited spec is recomputed, not served from cache.
     lens_files: dict[str, LensFile] = field(default_factory=dict)
+    # A sealed run's val scene seeds by run seed (`scene_seed`): drawn at random where the run began, never
+    # handed to an attacker (whose fit context holds the run seed), written with the results after it.
+    scene_seeds: dict[int, int] = field(default_factory=dict)
+
+    def scene_seed(self, seed: int) -> int:
+        """The seed of the val scenes (and their plate windows) of run seed `seed`: itself, unless sealed."""
+        return self.scene_seeds.get(seed, seed)
 
     def lens_source(self, name: str) -> str:
         """What `lenses.load` takes for the run's lens `name`: its spec file, or the registered name."""

@@ -287,13 +287,14 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
                                     settings=settings))
         return
     t0 = time.perf_counter()
-    ctx = own_context(target.ctx)
-    error = attempt(attacker.name, "fit", lambda: attacker.fit(ctx), cfg.budget_s)  # normally a cache hit
+    ctx = own_context(target.ctx, attacker.name)
+    root = target.ctx.cache_dir
+    error = attempt(attacker.name, "fit", lambda: attacker.fit(ctx), cfg.budget_s, root)  # normally a cache hit
     fit_s = meta.get("fit_s", time.perf_counter() - t0)  # fitted here when its task's result was not kept
     t0 = time.perf_counter()
     restored = error if isinstance(error, RowError) else attempt(
         attacker.name, "restore", lambda: restore_all(attacker, target.sensor, cfg.profile.batch_size, cfg.device),
-        cfg.budget_s)
+        cfg.budget_s, root)
     if isinstance(restored, RowError):
         out.rows.append(rows.failed(kind, attacker.name, restored, restorer=attacker.name, settings=settings))
         return
@@ -313,7 +314,8 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
     readers = [r for r in readers if cfg.wants(chain_name(attacker.name, r.reader.name))]
     if target.plates is not None and readers:
         windows = attempt(attacker.name, "restore", lambda: restore_windows(
-            attacker, target.plates.sensor, cfg.profile.batch_size, cfg.device))  # type: ignore[union-attr]
+            attacker, target.plates.sensor, cfg.profile.batch_size, cfg.device),  # type: ignore[union-attr]
+            cache_root=root)
         if isinstance(windows, RowError):
             out.rows.append(rows.failed(kind, attacker.name, windows, restorer=attacker.name, settings=settings))
             return
@@ -387,13 +389,13 @@ def fit_readers(target: Target, readers: Sequence[attacks.Reader], cfg: RunConfi
         if isinstance(described, RowError):
             ready.append(ReadyReader(reader, described))
             continue
-        ctx = own_context(target.ctx)
-        reason = attempt(reader.name, "fit", lambda: reader.skip_reason(ctx))
+        ctx = own_context(target.ctx, reader.name)
+        reason = attempt(reader.name, "fit", lambda: reader.skip_reason(ctx), cache_root=target.ctx.cache_dir)
         if reason and not isinstance(reason, RowError):
             log.info("%s on %s skipped: %s", reader.name, target.lens_name, reason)
             continue
         error = reason if isinstance(reason, RowError) else attempt(reader.name, "fit", lambda: reader.fit(ctx),
-                                                                     cfg.budget_s)
+                                                                     cfg.budget_s, target.ctx.cache_dir)
         if isinstance(error, RowError):
             ready.append(ReadyReader(reader, error, described))
             continue
@@ -429,7 +431,7 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
         chain_rows.append(rows.failed(kind, chain, error, restorer=restorer, reader=reader.name, settings=settings))
         return
     result = attempt(reader.name, "read", lambda: read_plates(reader, images, plate_scenes, cfg.profile.batch_size,
-                                                               cfg.device, segment), cfg.budget_s)
+                                                               cfg.device, segment), cfg.budget_s, target.ctx.cache_dir)
     if isinstance(result, RowError):
         chain_rows.append(rows.failed(kind, chain, result, restorer=restorer, reader=reader.name, settings=settings))
         return

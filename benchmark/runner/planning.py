@@ -85,12 +85,15 @@ def run_directory(cfg: RunConfig, restorers: list[AttackerRef], readers: list[At
     adds a lens or a seed finds the tasks of the ones already computed. The code version
     (``benchmark.store.provenance.code_version``) changes with any file the results depend on, not
     with docs or tests, so an interrupted run resumes after such a commit; each row still carries the
-    commit of the process that computed it."""
+    commit of the process that computed it. A sealed run's scene seeds are part of it (its tasks are
+    its own)."""
     key = config_hash({"version": TASK_VERSION, "code": code_version(),
                        "restorers": [r.identity for r in restorers], "readers": [r.identity for r in readers],
                        "scenes": cfg.scenes, "profile": cfg.profile.to_dict(),
                        "device": cfg.device, "plate_format": cfg.plate_format, "frames": cfg.frames,
-                       **({"chains": list(cfg.chains)} if cfg.chains is not None else {})})
+                       **({"chains": list(cfg.chains)} if cfg.chains is not None else {}),
+                       **({"scene_seeds": {str(k): v for k, v in sorted(cfg.scene_seeds.items())}}
+                          if cfg.scene_seeds else {})})
     return Path(cfg.cache_dir) / "tasks" / key
 
 

@@ -33,6 +33,7 @@ from benchmark.store.cache import (CHECKSUM_SUFFIX, ArtifactCache, discard, excl
                                    write_verified)
 from benchmark.codesign.trainer import TRAINER_VERSION
 from benchmark.runner.evaluation import Attacked, PlateSet, Target, attempt, fit_readers, read_sensor, run_reader, run_restorers
+from benchmark.runner.isolation import own_context
 from benchmark.runner.cascade import run_cascade, wanted_readers
 from benchmark.runner.intervals import utility_intervals
 from benchmark.runner.planning import AttackerRef, Task, fit_task
@@ -210,12 +211,13 @@ def failed_result(task: Task, cfg: RunConfig, exc: Exception) -> TaskResult | No
 # ---- helpers of the task bodies ----------------------------------------------------------------
 
 def _scenes(cfg: RunConfig, seed: int) -> list[Scene]:
-    return load_scenes(cfg.scenes, "val", cfg.profile.n_val, cfg.profile.image_size, seed)
+    return load_scenes(cfg.scenes, "val", cfg.profile.n_val, cfg.profile.image_size, cfg.scene_seed(seed))
 
 
 def plate_set(cfg: RunConfig, seed: int, lens: lenses.Lens | None) -> PlateSet | None:
-    """The plate windows of `seed` (benchmark.scenes.windows) seen through `lens` (None: the sharp
-    windows); None when the profile reads plates on the n_val scenes themselves.
+    """The plate windows of `seed` (benchmark.scenes.windows; of its scene seed, `RunConfig.scene_seed`)
+    seen through `lens` (None: the sharp windows); None when the profile reads plates on the n_val scenes
+    themselves.
 
     Val frames are drawn in order, one at a time (only the windows are kept), and a scored plate is
     taken while its width bin (WIDTH_BINS_PX) holds fewer than the profile's `plates_per_width_bin`
@@ -239,7 +241,7 @@ def plate_set(cfg: RunConfig, seed: int, lens: lenses.Lens | None) -> PlateSet |
     sensor: list[torch.Tensor] = []
     n_frames = 0
     while not quota.full and n_frames < profile.plate_frames:
-        frame = load_scene(cfg.scenes, "val", n_frames, profile.image_size, seed)
+        frame = load_scene(cfg.scenes, "val", n_frames, profile.image_size, cfg.scene_seed(seed))
         n_frames += 1
         windows = plate_windows([frame], take, min_size)
         if not windows:
@@ -406,14 +408,15 @@ def _fit(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
     attacker = attempt(ref.name, "load", lambda: load_attacker(ref.spec))
     if isinstance(attacker, RowError):
         return TaskResult(meta={"error": attacker.to_json()})
-    ctx = fit_context(_lens(cfg, task.lens, task.seed), cfg, task.seed, None)
-    reason = attempt(ref.name, "fit", lambda: attacker.skip_reason(ctx))
+    shared = fit_context(_lens(cfg, task.lens, task.seed), cfg, task.seed, None)
+    ctx, root = own_context(shared, ref.name), shared.cache_dir
+    reason = attempt(ref.name, "fit", lambda: attacker.skip_reason(ctx), cache_root=root)
     if isinstance(reason, RowError):
         return TaskResult(meta={"error": reason.to_json()})
     if reason:
         return TaskResult(meta={"skipped": reason})
     t0 = time.perf_counter()
-    error = attempt(ref.name, "fit", lambda: attacker.fit(ctx), cfg.budget_s)
+    error = attempt(ref.name, "fit", lambda: attacker.fit(ctx), cfg.budget_s, root)
     if isinstance(error, RowError):
         return TaskResult(meta={"error": error.to_json()})
     return TaskResult(meta={"fit_s": time.perf_counter() - t0})

@@ -36,6 +36,7 @@ from attacks.readers.plates.plate_sim import PlateBatch, psf_radius_px
 from attacks.training.plate_reader_training import EVAL_WIDTHS_PX, held_out_set
 from attacks.training.shipped_weights import SHIPPED_DIR, find_shipped, read_checked
 from benchmark.results import stats
+from benchmark.store.cache import ArtifactCache, cache_root
 from benchmark.store.provenance import git_commit, package_versions
 from common.plate_render import PLATE_FORMAT
 from lenses.lens import Lens
@@ -113,7 +114,9 @@ def measure_lens(name: str, seed: int = 0) -> dict[str, Any]:
     seconds: dict[str, float] = {}
     fitted = LearnedReader(use_shipped_fit=False)
     t0 = time.perf_counter()
-    report = fitted.fit(FitContext(lens=lens, seed=seed, budget=AttackBudget(profile="quick")))
+    # The run's own cache of learned-reader fits: ``ship-lens NAME --reader-only`` then ships this fit.
+    artifacts = ArtifactCache(cache_root() / "attacks")
+    report = fitted.fit(FitContext(lens=lens, seed=seed, budget=AttackBudget(profile="quick"), artifacts=artifacts))
     seconds["family+fit"] = round(time.perf_counter() - t0, 1)
     assert fitted.net is not None and fitted.curve is not None
     readers["family+fit"] = fitted.net.cpu()
@@ -130,7 +133,8 @@ def measure_lens(name: str, seed: int = 0) -> dict[str, Any]:
         "readers": {r: {"bins": _bins(o), f"from_{FROM_PX}px": round(float(np.mean(pooled[r])), 4)}
                     for r, o in outcomes.items()},
         "fit": {"seconds": seconds["family+fit"], "stage_seconds": {k: round(v, 1) for k, v in report.stage_seconds.items()},
-                "curve": fitted.curve.to_dict(), "budget": FAMILY_FINE_TUNE["quick"].to_dict(),
+                "trained_here": fitted.trained, "curve": fitted.curve.to_dict(),
+                "budget": FAMILY_FINE_TUNE["quick"].to_dict(),
                 "kept_start": fitted.curve.best_step == 0},
         "paired": {f"{a} - {b}": _compare(pooled[a], pooled[b]) for a, b in
                    [("family", "sharp"), ("family+fit", "family")]

@@ -81,9 +81,24 @@ class DescReader(Reader):
     name = "desc-reader"; threat_model = ThreatModel.SENSOR_ACCESS
     def describe(self): raise SystemExit(4)
     def read(self, images, hints=None): return [[] for _ in images]
+
+
+class Linger(Reader):
+    """Leaves an endless non-daemon thread and a child process behind, once a process."""
+    name = "linger"; threat_model = ThreatModel.SENSOR_ACCESS
+    started = False
+    def read(self, images, hints=None):
+        import subprocess, sys, threading, time
+        if not Linger.started:
+            Linger.started = True
+            child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(900)"])
+            with open(os.environ["PLB_TEST_CHILDREN"], "a") as f:
+                f.write(f"{child.pid}\\n")
+            threading.Thread(target=time.sleep, args=(900,), name="linger-thread").start()
+        return [[] for _ in images]
 '''
 ATTACKS = ["CopyBefore", "Mutate", "CopyAfter", "identity", "Exit", "Desc", "KillOnce", "ZeroReader", "Witness",
-           "DescReader"]
+           "DescReader", "Linger"]
 
 
 def smoke_run(args, cache, env=None, timeout=600):
@@ -100,7 +115,8 @@ def runs(tmp_path_factory):
     args = ["--lens", "ideal"]
     for name in ATTACKS:
         args += ["--attack", name if name == "identity" else f"{root / 'p.py'}:{name}"]
-    env = {"PLB_TEST_KILLED": str(root / "killed"), "PLB_TEST_WITNESS": str(root / "witness.txt")}
+    env = {"PLB_TEST_KILLED": str(root / "killed"), "PLB_TEST_WITNESS": str(root / "witness.txt"),
+           "PLB_TEST_CHILDREN": str(root / "children.txt")}
     killed = smoke_run([*args, "--out", str(root / "out1")], root / "cache", env)
     from benchmark.runner.tasks import TaskResult
     # A task with a failed row (sharp: desc-reader) is recomputed by design; the others must be reused.
@@ -109,7 +125,8 @@ def runs(tmp_path_factory):
     (root / "witness.txt").unlink(missing_ok=True)  # the second run's reads only
     resumed = smoke_run([*args, "--out", str(root / "out2")], root / "cache", env)
     return {"killed": killed, "out1": root / "out1", "resumed": resumed, "out2": root / "out2",
-            "cache": root / "cache", "witness": root / "witness.txt", "task_files": task_files}
+            "cache": root / "cache", "witness": root / "witness.txt", "task_files": task_files,
+            "children": root / "children.txt"}
 
 
 def rows_of(out):
@@ -176,6 +193,22 @@ def test_a_plugin_system_exit_and_a_raising_describe_are_failed_rows(runs):
 
 
 @pytest.mark.slow
+def test_a_plugins_child_and_thread_do_not_outlive_its_call_or_hold_the_exit(runs):
+    """The resumed run would wait 900 s for linger's thread (the run's timeout is 600 s): it ends once its
+    results are written, and the child linger started is ended when the read that started it returns."""
+    assert (runs["out2"] / "results.json").exists()
+    pids = [int(x) for x in runs["children"].read_text().split()]
+    assert len(pids) == 2  # one per run (the first was killed after linger's read)
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    err = runs["resumed"].stderr
+    assert "attacker 'linger' left 1 child process(es) running after read" in err
+    assert "attacker 'linger' left 1 thread(s) running after read (linger-thread)" in err
+    assert "ending the process without waiting for the plugin thread(s) linger: linger-thread" in err
+
+
+@pytest.mark.slow
 def test_every_task_picture_is_sealed_and_the_run_copies_match(runs):
     pictures = [p for p in (runs["cache"] / "tasks").rglob("*.png") if ".staging-" not in str(p.parent)]
     assert pictures
@@ -230,7 +263,7 @@ def test_each_attacker_gets_its_own_lens_and_adversary():
     object.__setattr__(lens, "adversary", RED10(width=4))
     shared = attacks.FitContext(lens=lens, adversary=lens.adversary)
     before = [p.clone() for p in shared.adversary.parameters()]
-    mine = own_context(shared)
+    mine = own_context(shared, "mine")
     assert mine.lens.adversary is mine.adversary  # one copy: the copied lens holds the copied adversary
     with torch.no_grad():
         for p in [*mine.lens.parameters(), *mine.adversary.parameters()]:
@@ -332,3 +365,56 @@ def test_a_plugin_exiting_while_it_loads_is_a_load_failure(tmp_path):
     (tmp_path / "exits.py").write_text("raise SystemExit(3)\n")
     loaded, failures = attacks.load_all([f"{tmp_path / 'exits.py'}:Anything"])
     assert loaded == [] and [f.error for f in failures] == ["SystemExit: 3"]
+
+
+# ---- each attacker's cache is its own ------------------------------------------------------------
+
+def test_each_attacker_caches_in_its_own_folder_and_cannot_name_anothers(tmp_path):
+    from benchmark.runner.isolation import own_context
+    from benchmark.store.cache import ArtifactCache
+    root = tmp_path / "attacks"
+    shared = attacks.FitContext(cache_dir=root, artifacts=ArtifactCache(root))
+    reader, restorer, odd = (own_context(shared, n) for n in ("learned-reader", "nafnet-known-pairs", "../up"))
+    key = {"lens": "gp", "budget": 1}
+    # Its own kind lands where a run kept it before attackers had folders (cached fits stay valid) ...
+    assert reader.artifacts.path("learned-reader", key) == ArtifactCache(root).path("learned-reader", key)
+    assert reader.cache_dir == root / "learned-reader"
+    # ... and another attacker's kind resolves inside the caller's own folder, never the other's.
+    assert restorer.artifacts.path("learned-reader", key).is_relative_to(root / "nafnet-known-pairs")
+    assert odd.cache_dir.parent == root and ".." not in odd.cache_dir.name
+    restorer.artifacts.save("learned-reader", key, b"not the reader's")
+    assert reader.artifacts.load("learned-reader", key) is None
+
+
+def test_an_attacker_that_rewrites_anothers_cached_fit_fails_and_the_fit_is_rebuilt(tmp_path, caplog):
+    """The probe: a restorer's fit zeroes learned-reader's cached weights and rewrites their checksum.
+    Its fit fails, naming the folder; the tampered file is removed (learned-reader fits again instead
+    of loading it); an honest attacker's call, and new files of another run, pass."""
+    import hashlib
+    import logging
+    from benchmark.runner.isolation import attempt, own_context
+    from benchmark.store.cache import ArtifactCache
+    root = tmp_path / "attacks"
+    shared = attacks.FitContext(cache_dir=root, artifacts=ArtifactCache(root))
+    reader = own_context(shared, "learned-reader")
+    key = {"lens": "gp"}
+    weights = reader.artifacts.save("learned-reader", key, b"trained weights")
+
+    def tamper() -> None:
+        weights.write_bytes(b"\0" * 15)
+        weights.with_name(weights.name + ".sha256").write_text(hashlib.sha256(b"\0" * 15).hexdigest() + "\n")
+
+    with caplog.at_level(logging.ERROR):
+        result = attempt("tamper", "fit", tamper, cache_root=root)
+    from benchmark.results.schema import RowError
+    assert isinstance(result, RowError) and result.attacker == "tamper"
+    assert result.stage == "fit" and "learned-reader" in result.message and "removed" in result.message
+    assert any("learned-reader" in r.message for r in caplog.records if r.levelno == logging.ERROR)
+    assert not weights.exists() and reader.artifacts.load("learned-reader", key) is None
+
+    def honest() -> str:
+        own_context(shared, "honest").artifacts.save("honest", key, b"mine")
+        (root / "learned-reader" / "another-run.safetensors").write_bytes(b"new")  # a file that did not exist
+        return "done"
+
+    assert attempt("honest", "fit", honest, cache_root=root) == "done"
