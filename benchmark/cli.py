@@ -175,7 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--plate-format", type=_plate_format, default=None, metavar="FORMAT",
                      help="plate strings the privacy bound counts: L = letter, D = digit (default: the scene generator's)")
     run.add_argument("--budget-s", type=_budget, default=None, metavar="SECONDS",
-                     help="wall-time budget of each expensive step (an attacker's fit, restore or read; the bound): "
+                     help="wall-time budget of each expensive step (a lens's co-design, an attacker's fit, restore "
+                          "or read; the bound): "
                           "a step past it gives a failed row with a clear message (default: none). It is checked "
                           "between Python operations (a signal), so one long native call (a big convolution, an "
                           "ONNX Runtime run) finishes first: a step can overrun it by that call's length")

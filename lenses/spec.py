@@ -344,6 +344,10 @@ def _sensor(t: dict) -> SensorSpec:
     return SensorSpec(quantum_efficiency=qe, **kw)  # type: ignore[arg-type]
 
 
+MAX_PSF_SIZE_PX = 1025   # simulation.max_psf_size_px at most (the studies' reference uses 301)
+MAX_PUPIL_SAMPLES = 8192  # simulation.max_pupil_samples at most (1 GiB per complex128 grid; the reference uses 4096)
+
+
 def _simulation(t: dict) -> SimulationSpec:
     d = SimulationSpec()
     frac = _number(t.get("psf_energy_fraction", d.psf_energy_fraction), "simulation.psf_energy_fraction")
@@ -352,11 +356,15 @@ def _simulation(t: dict) -> SimulationSpec:
     max_k = _integer(t.get("max_psf_size_px", d.max_psf_size_px), "simulation.max_psf_size_px", 3)
     if max_k % 2 == 0:
         raise LensSpecError(f"simulation.max_psf_size_px = {max_k} must be odd (the PSF has a centre pixel)")
-    return SimulationSpec(
-        psf_energy_fraction=frac,
-        max_psf_size_px=max_k,
-        max_pupil_samples=_integer(t.get("max_pupil_samples", d.max_pupil_samples), "simulation.max_pupil_samples", 32),
-    )
+    if max_k > MAX_PSF_SIZE_PX:
+        raise LensSpecError(f"simulation.max_psf_size_px = {max_k} is too large; valid: 3 to {MAX_PSF_SIZE_PX} (odd): a "
+                            "wider kernel is an image of its own, and every convolution pads the image by it")
+    samples = _integer(t.get("max_pupil_samples", d.max_pupil_samples), "simulation.max_pupil_samples", 32)
+    if samples > MAX_PUPIL_SAMPLES:
+        raise LensSpecError(f"simulation.max_pupil_samples = {samples} is too large; valid: 32 to {MAX_PUPIL_SAMPLES} "
+                            f"(one {samples} x {samples} complex pupil grid is {samples ** 2 * 16 / 2 ** 30:.1f} GiB, "
+                            "and the PSF needs several per wavelength)")
+    return SimulationSpec(psf_energy_fraction=frac, max_psf_size_px=max_k, max_pupil_samples=samples)
 
 
 def spec_folder(source: str) -> Path:

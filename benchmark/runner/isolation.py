@@ -14,7 +14,8 @@ The cache is on disk, which an attacker's code can reach anyway; so every call i
 given the attack folder (``attempt(..., cache_root=)``) is checked afterwards (``CacheGuard``): a file of
 another attacker's folder that existed before the call and was changed or removed by it fails the call's
 row, naming the folders, and the changed files are removed, so their owner rebuilds them instead of
-loading what another attacker wrote. New files are not flagged (another run sharing the cache may be
+loading what another attacker wrote; a call that adds, changes or removes a file of the leaderboard
+folder fails the same way (that folder is restored from git, not rebuilt). New cache files are not flagged (another run sharing the cache may be
 creating its own); a run sharing the cache that replaces an existing artifact during the call (two runs
 fitting the same key at once) trips it too, and a rerun passes.
 
@@ -44,6 +45,7 @@ import torch
 
 import attacks
 from benchmark.runner.budget import time_budget
+from benchmark.results.entries import LEADERBOARD
 from benchmark.results.schema import RowError
 from benchmark.store.cache import ArtifactCache, config_hash, discard
 
@@ -91,12 +93,15 @@ def own_context(ctx: attacks.FitContext, attacker: str) -> attacks.FitContext:
 
 class CacheGuard:
     """The files of every other attacker's folder of an attack folder, as they were when it was made
-    (inode, size, modification time), to tell which of them a plugin call changed or removed."""
+    (inode, size, modification time), to tell which of them a plugin call changed or removed; and of
+    the leaderboard folder, where a plugin call may change, remove or add nothing."""
 
-    def __init__(self, root: Path | None, attacker: str):
+    def __init__(self, root: Path | None, attacker: str, leaderboard: Path | None = LEADERBOARD):
         self.root = None if root is None else Path(root)
         self.own = attacker_folder(attacker)
+        self.leaderboard = leaderboard
         self.before = self._state()
+        self.board = _files(leaderboard)
 
     def _state(self) -> dict[str, tuple[int, int, int]]:
         state: dict[str, tuple[int, int, int]] = {}
@@ -105,14 +110,7 @@ class CacheGuard:
         for top in os.scandir(self.root):
             if top.name == self.own or not top.is_dir(follow_symlinks=False):
                 continue
-            for folder, _, files in os.walk(top.path):
-                for name in files:
-                    path = os.path.join(folder, name)
-                    try:
-                        st = os.lstat(path)
-                    except FileNotFoundError:
-                        continue
-                    state[path] = (st.st_ino, st.st_size, st.st_mtime_ns)
+            state.update(_files(Path(top.path)))
         return state
 
     def changed(self) -> list[Path]:
@@ -120,9 +118,21 @@ class CacheGuard:
         after = self._state()
         return sorted(Path(p) for p, was in self.before.items() if after.get(p) != was)
 
+    def board_changed(self) -> list[Path]:
+        """The files of the leaderboard folder added, changed or removed since."""
+        after = _files(self.leaderboard)
+        return sorted(Path(p) for p in set(after) | set(self.board) if after.get(p) != self.board.get(p))
+
     def failure(self, attacker: str, stage: str) -> RowError | None:
         """None when nothing changed; else the RowError of `attacker` at `stage`, after removing the
-        changed files and their checksums (logged as an error)."""
+        changed cache files and their checksums (logged as an error)."""
+        board = self.board_changed()
+        if board and self.leaderboard is not None:
+            message = (f"changed {len(board)} file(s) of the leaderboard folder (e.g. "
+                       f"{board[0].relative_to(self.leaderboard)}): an attacker may write only its own cache "
+                       f"folder; restore the folder (git checkout -- {self.leaderboard.name}/) before publishing")
+            log.error("attacker %r at %s: %s", attacker, stage, message)
+            return RowError(attacker, stage, message)
         changed = self.changed()
         if not changed or self.root is None:
             return None
@@ -134,6 +144,22 @@ class CacheGuard:
                    "removed and their owner will rebuild them")
         log.error("attacker %r at %s: %s", attacker, stage, message)
         return RowError(attacker, stage, message)
+
+
+def _files(folder: Path | None) -> dict[str, tuple[int, int, int]]:
+    """(inode, size, modification time) of every file under `folder` (none when it is None or absent)."""
+    state: dict[str, tuple[int, int, int]] = {}
+    if folder is None:
+        return state
+    for where, _, files in os.walk(folder):
+        for name in files:
+            path = os.path.join(where, name)
+            try:
+                st = os.lstat(path)
+            except FileNotFoundError:
+                continue
+            state[path] = (st.st_ino, st.st_size, st.st_mtime_ns)
+    return state
 
 
 _STRAY: list[tuple[str, threading.Thread]] = []  # (attacker, a non-daemon thread it left running)

@@ -345,7 +345,9 @@ def _sharp(task: Task, cfg: RunConfig, _: Path) -> TaskResult:
 
 def _lens_task(task: Task, cfg: RunConfig, staging: Path) -> TaskResult:
     t0 = time.perf_counter()
-    lens = _lens(cfg, task.lens, task.seed)
+    # Co-designing a lens is a run's longest step: --budget-s covers it (past it, the lens's rows fail).
+    with time_budget(cfg.budget_s, f"lens {task.lens!r} (its co-design or load)"):
+        lens = _lens(cfg, task.lens, task.seed)
     fit_s = time.perf_counter() - t0
     sharp = to_tensor(_scenes(cfg, task.seed))
     t0 = time.perf_counter()

@@ -37,6 +37,9 @@ def with_(section, key, value):
     (with_("mask", "bounds_um", [[-1, 1]] * 5), r"mask\.bounds_um must be a list of 6"),
     (with_("mask", "bounds_um", [[-0.1, 0.1]] * 6), r"mask\.zernike_um\[3\] = 0.2 lies outside"),
     (with_("simulation", "max_psf_size_px", 34), r"simulation\.max_psf_size_px = 34 must be odd"),
+    # Edges a run would exhaust memory on are refused at load, saying what is valid.
+    (with_("simulation", "max_psf_size_px", 100001), r"max_psf_size_px = 100001 is too large; valid: 3 to 1025"),
+    (with_("simulation", "max_pupil_samples", 100000), r"max_pupil_samples = 100000 is too large; valid: 32 to 8192"),
     ({"name": "x", "mask": {"zernike_um": [0] * 6}, "lens": {}}, r"unknown key 'lens'"),
 ])
 def test_malformed_spec_names_the_field(raw, pattern):

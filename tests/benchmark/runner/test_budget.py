@@ -60,3 +60,18 @@ def test_a_native_call_that_overruns_the_budget_is_named_in_the_message():
     spent = float(message.split("was stopped after ")[1].split(" s")[0])
     assert spent >= 0.9, message
     assert "a native call that was running finished first" in message and "past the budget" in message
+
+
+def test_a_lens_task_past_its_budget_names_the_lens(monkeypatch, tmp_path):
+    """The co-design of a lens is covered too: a lens task that raises gives the lens's failed rows."""
+    from benchmark.runner import tasks
+    from benchmark.runner.config import RunConfig
+    from benchmark.runner.planning import Task
+    from benchmark.store.profiles import get_profile
+    monkeypatch.setattr(tasks, "_lens", lambda cfg, name, seed: time.sleep(30))
+    cfg = RunConfig(lenses=["gp"], attacks=[], scenes="synthetic", profile=get_profile("smoke"), seeds=[0],
+                    cache_dir=tmp_path, budget_s=0.2)
+    t0 = time.perf_counter()
+    with pytest.raises(BudgetExceeded, match=r"lens 'gp' \(its co-design or load\) ran past its budget of 0.2 s"):
+        tasks._lens_task(Task("lens", 0, "gp"), cfg, tmp_path)
+    assert time.perf_counter() - t0 < 5

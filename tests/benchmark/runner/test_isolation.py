@@ -418,3 +418,19 @@ def test_an_attacker_that_rewrites_anothers_cached_fit_fails_and_the_fit_is_rebu
         return "done"
 
     assert attempt("honest", "fit", honest, cache_root=root) == "done"
+
+
+def test_a_plugin_call_that_writes_into_the_leaderboard_folder_fails(tmp_path):
+    from benchmark.results.schema import RowError
+    from benchmark.runner.isolation import CacheGuard
+    board = tmp_path / "leaderboard"
+    (board / "entries").mkdir(parents=True)
+    (board / "entries" / "gp__quick__synthetic.json").write_text("{}")
+    quiet = CacheGuard(tmp_path / "attacks", "honest", leaderboard=board)
+    assert quiet.failure("honest", "read") is None
+    for write in (lambda: (board / "entries" / "planted.json").write_text("{}"),
+                  lambda: (board / "entries" / "gp__quick__synthetic.json").write_text('{"rows": []}')):
+        guard = CacheGuard(tmp_path / "attacks", "planter", leaderboard=board)
+        write()
+        error = guard.failure("planter", "fit")
+        assert isinstance(error, RowError) and "leaderboard folder" in error.message and "entries/" in error.message
