@@ -11,12 +11,7 @@ over nine views of the box (``VIEWS``: a detector's box is never exact, and neit
 it reads the restorer's output the same way (it was trained on sensor images, so this is the weaker
 use of it).
 
-Fitting: the network starts from shipped weights: for the quick and paper profiles (``FAMILY_PROFILES``)
-the pre-training across the lens family (``attacks/weights/learned-reader-family-s0.*``, made by ``python
--m benchmark pretrain-attacker learned-reader --family``, ``attacks.training.reader_family_training``),
-which reads lenses it never saw; it is evaluated on the lens first and fine-tuned briefly
-(``FAMILY_FINE_TUNE``), keeping the start unless the fine-tune beats it. Otherwise (smoke, tiny, or no
-family weights shipped) it starts from the pre-training on sharp plates (clean renders with white noise,
+Fitting: the network starts from the pre-training on sharp plates (clean renders with white noise,
 ``attacks/weights/learned-reader-sharp-s0.*``, ``python -m benchmark pretrain-attacker learned-reader``)
 and is fine-tuned on the lens (``BUDGETS``) until its held-out accuracy flattens
 (``attacks.training.plate_reader_training``). The curve is kept with the weights and comes back in the
@@ -49,7 +44,7 @@ from attacks.readers.plates.plate_sim import plate_crops, psf_radius_px
 from attacks.training.restorer_training import lens_key
 from attacks.training.shipped_weights import Shipped, find_shipped, key_text
 
-__all__ = ["BUDGETS", "FAMILY_FINE_TUNE", "FAMILY_PROFILES", "PRETRAIN_BUDGET", "LearnedReader", "family_key", "pack_weights", "pretrain", "pretrained_key",
+__all__ = ["BUDGETS", "PRETRAIN_BUDGET", "LearnedReader", "family_key", "pack_weights", "pretrain", "pretrained_key",
            "unpack_weights"]
 
 log = logging.getLogger(__name__)
@@ -70,22 +65,7 @@ BUDGETS: dict[str, ReaderBudget] = {
     "paper": ReaderBudget(max_steps=6000, batch_size=64, lr=1e-3, widths_px=(8.0, 200.0), eval_every=200,
                           eval_plates=128, patience=5, bands_per_batch=4),
 }
-"""Fine-tuning budget per ``AttackBudget.profile`` (one for each of ``attacks.base.BUDGET_PROFILES``), from the
-sharp start."""
-
-FAMILY_PROFILES = ("quick", "paper")
-"""The profiles whose fits start from the family pre-training when the package ships it; smoke and tiny keep
-the sharp start and its budgets (a pipeline check, and what the published smoke entries were measured with)."""
-
-FAMILY_FINE_TUNE: dict[str, ReaderBudget] = {
-    "quick": ReaderBudget(max_steps=600, batch_size=48, lr=5e-4, widths_px=(8.0, 200.0), eval_every=100,
-                          eval_plates=32, patience=2, bands_per_batch=4, eval_start=True),
-    "paper": ReaderBudget(max_steps=3000, batch_size=64, lr=5e-4, widths_px=(8.0, 200.0), eval_every=200,
-                          eval_plates=128, patience=4, bands_per_batch=4, eval_start=True),
-}
-"""Fine-tuning budget from the family start: the start is evaluated on the lens first and kept unless the
-fine-tune beats it; the fit stops once ``patience`` evaluations gain under ``min_gain`` (the gain no longer
-pays for its seconds)."""
+"""Fine-tuning budget per ``AttackBudget.profile`` (one for each of ``attacks.base.BUDGET_PROFILES``)."""
 
 VIEWS: tuple[tuple[float, float, float], ...] = (
     (0.0, 0.0, 1.0), (0.02, 0.0, 1.0), (-0.02, 0.0, 1.0), (0.0, 0.0, 1.04), (0.0, 0.0, 0.96),
@@ -194,8 +174,8 @@ class LearnedReader(Reader):
         seed = ctx.seed if self.fit_seed is None else self.fit_seed
         pretrain_budget = BUDGETS[profile] if profile in ("tiny", "smoke") else PRETRAIN_BUDGET
         t0 = time.perf_counter()
-        net, start = self._start(seed, pretrain_budget, family=profile in FAMILY_PROFILES)
-        self.budget = FAMILY_FINE_TUNE[profile] if "family" in start else BUDGETS[profile]
+        net, start = self._start(seed, pretrain_budget)
+        self.budget = BUDGETS[profile]
         seconds = {"start": time.perf_counter() - t0}
         if lens is None:  # the sharp scenes themselves: the start was trained on sharp plates, read with it
             self.spread_px, self.budget, self.trained = 0.0, None, False
@@ -219,8 +199,7 @@ class LearnedReader(Reader):
                 log.warning("%s: %s do not load (%s: %s); fitting again and storing the new fit", self.name, where,
                             type(exc).__name__, exc)
                 data, self.shipped_fit = None, None
-                # A failed load may have overwritten some weights.
-                net, _ = self._start(seed, pretrain_budget, family=profile in FAMILY_PROFILES)
+                net, _ = self._start(seed, pretrain_budget)  # a failed load may have overwritten some weights
         if data is None:
             camera = self._camera(ctx)
             held_out = held_out_set(camera, self.budget, self.spread_px, half, self.plate_format, seed)
@@ -243,20 +222,16 @@ class LearnedReader(Reader):
                               self.curve.stopped, self.curve.steps[self.curve.kept])
         return FitReport(curve=curve, still_rising=self.curve.still_rising, stage_seconds=seconds)
 
-    def _start(self, seed: int, pretrain_budget: ReaderBudget, family: bool) -> tuple[PlateCNN, dict[str, Any]]:
-        """The network to fine-tune and what it started from: with ``family``, the shipped family
-        pre-training for the plate format (its key holds "family"); else, or without it, the shipped
-        sharp pre-training; else a fresh network pre-trained here on sharp plates (seeded, ``pretrain_budget``)."""
+    def _start(self, seed: int, pretrain_budget: ReaderBudget) -> tuple[PlateCNN, dict[str, Any]]:
+        """The network to fine-tune and what it started from: the shipped pre-trained weights for the
+        plate format, else a fresh network pre-trained here on sharp plates (seeded, ``pretrain_budget``)."""
         net = self.build(self.plate_format, seed)
-        keys = ([("family", family_key(self.plate_format))] if family else []) + [
-            ("sharp", pretrained_key(self.plate_format))]
-        for kind, key in keys if self.use_shipped else []:
-            shipped = find_shipped(self.name, key)
-            if shipped is not None:
-                unpack_weights(net, shipped.data)
-                self.shipped = shipped
-                start = {"shipped": shipped.path.name, "sha256": shipped.provenance["sha256"]}
-                return net, ({"family": True, **start} if kind == "family" else start)
+        # The learned reader's own start, also for readers built on it (learned-reader-psf).
+        shipped = find_shipped(LearnedReader.name, pretrained_key(self.plate_format)) if self.use_shipped else None
+        if shipped is not None:
+            unpack_weights(net, shipped.data)
+            self.shipped = shipped
+            return net, {"shipped": shipped.path.name, "sha256": shipped.provenance["sha256"]}
         curve = pretrain(net, self.plate_format, seed, pretrain_budget)
         return net, {"pretrained_here": {**pretrained_key(self.plate_format, seed), "budget": pretrain_budget.to_dict()},
                      "held_out": curve.accuracy[curve.kept:][:1]}
@@ -279,8 +254,8 @@ class LearnedReader(Reader):
         if not wanted:
             return reads
         device = next(self.net.parameters()).device
-        images = images.to(device)
         with torch.no_grad():
+            images = self.reader_input(images.to(device))
             per_view = [[slot.softmax(dim=1).cpu() / len(VIEWS) for slot in
                          self.net(plate_crops(images, [(i, _moved(box, view)) for i, box in wanted], self.spread_px))]
                         for view in VIEWS]
@@ -292,6 +267,10 @@ class LearnedReader(Reader):
             score = float(torch.stack([b.values for b in best]).prod())
             reads[i].append(PlateRead(text, (box[0], box[1], box[2], box[3]), score))
         return reads
+
+    def reader_input(self, images: Tensor) -> Tensor:
+        """What the crops are cut from: the images themselves (``learned-reader-psf`` deconvolves them first)."""
+        return images
 
     def describe(self) -> dict[str, Any]:
         """Budget, plate format, PSF spread and where the start weights came from."""

@@ -3,8 +3,8 @@
 ``PROPOSED_ENSEMBLE`` is what the rule of ``benchmark.results.ensemble_choice`` (``keeps``) selects on the
 published quick entries (docs/ensemble.md, written by ``python -m benchmark.studies.ensemble_choice_study``;
 tests/benchmark/results/test_ensemble_choice.py recomputes it, so it cannot drift from the entries).
-``MEASURED_ADDITIONS`` are attackers newer than those entries, added on measurement until the next
-choice re-runs the rule on entries that hold them. ``STANDARD_ENSEMBLE`` is what a run measures unless
+``MEASURED_ADDITIONS`` (restorers) and ``MEASURED_READERS`` are attackers newer than those entries, added on
+measurement until the next choice re-runs the rule on entries that hold them. ``STANDARD_ENSEMBLE`` is what a run measures unless
 told otherwise (``benchmark.runner.runner.standard_attackers``).
 """
 
@@ -12,8 +12,8 @@ from __future__ import annotations
 
 from benchmark.results.schema import CASCADE_PREFIX, cascade_name
 
-__all__ = ["CASCADE", "CASCADE_PREFIX", "LEARNED_READER", "MEASURED_ADDITIONS", "PROPOSED_ENSEMBLE",
-           "STANDARD_ENSEMBLE", "chain_parts"]
+__all__ = ["CASCADE", "CASCADE_PREFIX", "LEARNED_READER", "MEASURED_ADDITIONS", "MEASURED_READERS",
+           "PROPOSED_ENSEMBLE", "STANDARD_ENSEMBLE", "chain_parts"]
 
 # What the rule selects on the published quick entries (see the module docstring and DOCS); the test
 # recomputes it from leaderboard/entries/*quick*.json.
@@ -27,6 +27,11 @@ LEARNED_READER = "learned-reader"
 # of those entries on the same scenes (leaderboard/studies/known_psf_restorers.json): the family-trained
 # known-PSF restorer, which needs no per-lens fit, and the paper's plate reader after it.
 MEASURED_ADDITIONS: tuple[str, ...] = ("nafnet-known-psf", "nafnet-known-psf>lpdr-oracle")
+# Readers the published entries predate, added because, on those entries' own plates (paired by plate
+# id, leaderboard/studies/psf_reader.json), adding them raises the ensemble's plates read from 32 px by
+# more than the rule's 1 point: the sharp-plate reader on the Wiener estimate of the known lens, which
+# needs no per-lens fit (docs/modelling.md).
+MEASURED_READERS: tuple[str, ...] = ("learned-reader-psf",)
 # The run's default chains: the proposal and the uncorrected image as a reference restorer. The learned
 # reader is always in it (the rule keeps it wherever entries hold it) and stays last of the readers, the
 # order the published entries' runs evaluated their chains in.
@@ -34,7 +39,7 @@ MEASURED_ADDITIONS: tuple[str, ...] = ("nafnet-known-psf", "nafnet-known-psf>lpd
 # (benchmark.runner.cascade): the maximum-likelihood reader costs seconds a plate.
 CASCADE: tuple[str, ...] = (cascade_name("ideal-observer"),)
 STANDARD_ENSEMBLE: tuple[str, ...] = (tuple(c for c in PROPOSED_ENSEMBLE if c != LEARNED_READER) + MEASURED_ADDITIONS
-                                      + (LEARNED_READER, "raw") + CASCADE)
+                                      + MEASURED_READERS + (LEARNED_READER, "raw") + CASCADE)
 
 
 def chain_parts(chain: str) -> list[str]:

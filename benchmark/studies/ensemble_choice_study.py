@@ -136,7 +136,8 @@ def render(directory: Path = LEADERBOARD, date: str | None = None) -> str:
         f"Left out of the proposal ({len(dropped)}): " + (", ".join(f"`{a}`" for a in dropped) or "none") + ".", "",
         "This is `benchmark.runner.defaults.PROPOSED_ENSEMBLE`. The run's default, "
         "`STANDARD_ENSEMBLE`, is it with the attackers newer than these entries that were measured stronger "
-        "(`MEASURED_ADDITIONS`), `learned-reader` on the sensor image, the `raw` reference (the "
+        "(`MEASURED_ADDITIONS`: restorers; `MEASURED_READERS`: readers whose addition raised these entries' "
+        "ensemble on their own plates), `learned-reader` on the sensor image, the `raw` reference (the "
         "uncorrected image's PSNR, read by no chain) and last the cascade (`CASCADE`: the maximum-likelihood "
         "reader on the plates no chain before it read, benchmark.runner.cascade): `python -m benchmark run` "
         "measures those chains only, "

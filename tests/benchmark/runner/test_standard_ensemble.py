@@ -9,7 +9,8 @@ import torch
 
 import attacks
 from benchmark import api
-from benchmark.runner.defaults import CASCADE, MEASURED_ADDITIONS, PROPOSED_ENSEMBLE, STANDARD_ENSEMBLE, chain_parts
+from benchmark.runner.defaults import (
+    CASCADE, MEASURED_ADDITIONS, MEASURED_READERS, PROPOSED_ENSEMBLE, STANDARD_ENSEMBLE, chain_parts)
 from benchmark.runner import runner
 from benchmark.runner.config import RunConfig
 from benchmark.runner.evaluation import Attacked, PlateSet, ReadyReader, Target, read_sensor, run_restorers
@@ -70,8 +71,8 @@ def test_only_the_chains_of_the_ensemble_are_read_and_their_restorers_windows_re
 
 
 def test_the_standard_ensemble_is_the_proposal_with_the_measured_additions_the_learned_reader_raw_and_the_cascade():
-    assert set(STANDARD_ENSEMBLE) == (set(PROPOSED_ENSEMBLE) | set(MEASURED_ADDITIONS) | {"learned-reader", "raw"}
-                                      | set(CASCADE))
+    assert set(STANDARD_ENSEMBLE) == (set(PROPOSED_ENSEMBLE) | set(MEASURED_ADDITIONS) | set(MEASURED_READERS)
+                                      | {"learned-reader", "raw"} | set(CASCADE))
     assert len(STANDARD_ENSEMBLE) == len(set(STANDARD_ENSEMBLE))
     assert STANDARD_ENSEMBLE[-3:] == ("learned-reader", "raw", *CASCADE)
     named = runner.standard_attackers()
@@ -115,3 +116,19 @@ def test_each_measured_addition_beat_every_published_restorer_on_the_study_s_len
             assert record["versus_published_ensemble"]["verdict"] == "holds"
             assert all(c["verdict"] == "holds" for c in record["versus_published"].values()
                        if c["difference_db"] != 0.0)
+
+
+def test_each_measured_reader_raises_the_published_ensemble_by_more_than_the_rules_point():
+    """On the published entries' own plates (paired by plate id, from 32 px, seed 0), adding the reader
+    raises the entry's ensemble by more than 1 point (the rule that keeps a chain), significantly, on
+    some lens of the study; and it never needs the plates to be re-drawn (every lens paired)."""
+    import json
+    from pathlib import Path
+
+    study = json.loads((Path(__file__).resolve().parents[3] / "leaderboard" / "studies" / "psf_reader.json").read_text())
+    assert {"ideal", "defocus", "gp", "os", "os-d-1000"} <= set(study["lenses"])
+    assert all(lens["paired"] for lens in study["lenses"].values())
+    for reader in MEASURED_READERS:
+        gains = [lens["paired_from_32px"]["ensemble with it - published ensemble"] for lens in study["lenses"].values()]
+        assert any(g["verdict"] == "holds" and g["difference_pt"] > 1.0 for g in gains), (reader, gains)
+        assert all(g["difference_pt"] >= 0.0 for g in gains)
