@@ -192,20 +192,24 @@ def child_pids() -> set[int]:
 
 
 def _end(pids: set[int], grace_s: float = 2.0) -> None:
-    """SIGTERM `pids`, then SIGKILL whichever is still there after `grace_s`; reap them."""
+    """SIGTERM `pids`, then SIGKILL whichever is still there after `grace_s`, reaping each (a child left
+    unreaped stays a zombie for as long as this process lives)."""
+    left = set(pids)
     for sig in (signal.SIGTERM, signal.SIGKILL):
-        for pid in pids:
+        for pid in left:
             with contextlib.suppress(OSError):
                 os.kill(pid, sig)
         deadline = time.monotonic() + grace_s
-        while pids and time.monotonic() < deadline:
-            for pid in list(pids):
-                with contextlib.suppress(OSError):
+        while left and time.monotonic() < deadline:
+            for pid in list(left):
+                try:
                     if os.waitpid(pid, os.WNOHANG)[0]:
-                        pids.discard(pid)
-            pids &= child_pids()  # reaped elsewhere, or a zombie its Popen will reap
-            time.sleep(0.05)
-        if not pids:
+                        left.discard(pid)
+                except ChildProcessError:  # reaped elsewhere (by its Popen)
+                    left.discard(pid)
+            if left:
+                time.sleep(0.05)
+        if not left:
             return
 
 
