@@ -36,15 +36,13 @@ from torch import Tensor
 
 from attacks.base import FitContext, FitCurve as ReportedCurve, FitReport, PlateRead, ReadHints, Reader, ThreatModel
 from attacks.networks.plate_cnn import PlateCNN
-from attacks.training.lens_family import LensFamily
 from attacks.training.plate_reader_training import Camera, FitCurve, ReaderBudget, held_out_set, train_reader
-from attacks.training.reader_family_training import FAMILY_BUDGET
 from common.plate_render import PLATE_FORMAT, format_alphabets
 from attacks.readers.plates.plate_sim import plate_crops, psf_radius_px
 from attacks.training.restorer_training import lens_key
 from attacks.training.shipped_weights import Shipped, find_shipped, key_text
 
-__all__ = ["BUDGETS", "PRETRAIN_BUDGET", "LearnedReader", "family_key", "pack_weights", "pretrain", "pretrained_key",
+__all__ = ["BUDGETS", "PRETRAIN_BUDGET", "LearnedReader", "pack_weights", "pretrain", "pretrained_key", "start_budget",
            "unpack_weights"]
 
 log = logging.getLogger(__name__)
@@ -83,11 +81,11 @@ def pretrained_key(fmt: str, seed: int = 0) -> dict[str, Any]:
             "budget": PRETRAIN_BUDGET.to_dict(), "seed": seed}
 
 
-def family_key(fmt: str, seed: int = 0) -> dict[str, Any]:
-    """The key the family pre-training is shipped (and looked up) under: it continues the sharp start."""
-    return {"attack": LearnedReader.name, "stage": "pretrained-family", "format": fmt, "width": WIDTH,
-            "budget": FAMILY_BUDGET.to_dict(), "family": LensFamily().describe(), "start": pretrained_key(fmt, seed),
-            "seed": seed}
+def start_budget(profile: str) -> ReaderBudget:
+    """The pre-training a fit runs here when the package ships no start for its plate format: the full one
+    for quick and paper, the profile's own small one for smoke and tiny (the full one takes tens of
+    minutes on 2 cores)."""
+    return BUDGETS[profile] if profile in ("tiny", "smoke") else PRETRAIN_BUDGET
 
 
 def pack_weights(net: PlateCNN, curve: FitCurve) -> bytes:
@@ -169,10 +167,8 @@ class LearnedReader(Reader):
         self.plate_format = ctx.plate_format
         lens: Any = ctx.lens
         profile = ctx.budget.profile
-        # Without shipped weights a smoke or tiny budget starts from its own small pre-training: the full
-        # one takes tens of minutes on 2 cores.
         seed = ctx.seed if self.fit_seed is None else self.fit_seed
-        pretrain_budget = BUDGETS[profile] if profile in ("tiny", "smoke") else PRETRAIN_BUDGET
+        pretrain_budget = start_budget(profile)
         t0 = time.perf_counter()
         net, start = self._start(seed, pretrain_budget)
         self.budget = BUDGETS[profile]

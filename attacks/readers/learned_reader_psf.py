@@ -24,7 +24,7 @@ from torch import Tensor
 
 from attacks.backends.real_fft import OtfCache
 from attacks.base import FitContext, FitReport, ThreatModel
-from attacks.readers.learned_reader import BUDGETS, PRETRAIN_BUDGET, LearnedReader
+from attacks.readers.learned_reader import LearnedReader, start_budget
 from attacks.training.psf_restorer_training import psf_inputs
 
 __all__ = ["LearnedReaderPSF"]
@@ -50,9 +50,8 @@ class LearnedReaderPSF(LearnedReader):
         if reason is not None:
             raise ValueError(reason)
         self.plate_format = ctx.plate_format
-        profile = ctx.budget.profile
         t0 = time.perf_counter()
-        net, _ = self._start(0, BUDGETS[profile] if profile in ("tiny", "smoke") else PRETRAIN_BUDGET)
+        net, _ = self._start(0, start_budget(ctx.budget.profile))
         self.net = net.to(ctx.device).eval()
         self.spread_px, self.budget, self.trained, self.curve = 0.0, None, False, None
         if ctx.lens is not None:

@@ -44,8 +44,8 @@ from tqdm.auto import tqdm
 from attacks.networks.plate_cnn import PlateCNN
 from attacks.readers.plates.plate_sim import PlateBatch, simulate_plates
 
-__all__ = ["EVAL_WIDTHS_PX", "FitCurve", "ReaderBudget", "held_out_set", "plate_accuracy", "slot_loss", "train_reader",
-           "training_batch", "width_bands"]
+__all__ = ["EVAL_WIDTHS_PX", "FitCurve", "ReaderBudget", "flattened", "held_out_gain", "held_out_set", "optimiser", "plate_accuracy",
+           "slot_loss", "train_reader", "training_batch", "width_bands"]
 
 log = logging.getLogger(__name__)
 
@@ -162,6 +162,17 @@ def slot_loss(logits: list[Tensor], labels: Tensor, criterion: nn.Module) -> Ten
     return sum((criterion(slot, labels[:, i]) for i, slot in enumerate(logits)), torch.zeros(())) / len(logits)
 
 
+def optimiser(net: nn.Module, budget: ReaderBudget) -> tuple[torch.optim.Optimizer, torch.optim.lr_scheduler.LambdaLR,
+                                                              nn.Module]:
+    """The recipe's optimiser, schedule and loss (module docstring): AdamW, a tenth of the steps warm-up,
+    then cosine; cross-entropy with label smoothing 0.05."""
+    optimizer = torch.optim.AdamW(net.parameters(), lr=budget.lr, weight_decay=1e-4)
+    warmup, total = max(1, budget.max_steps // 10), max(budget.max_steps, 1)
+    schedule = torch.optim.lr_scheduler.LambdaLR(
+        optimizer, lambda s: min(1.0, (s + 1) / warmup) * 0.5 * (1.0 + math.cos(math.pi * min(s, total) / total)))
+    return optimizer, schedule, nn.CrossEntropyLoss(label_smoothing=0.05)
+
+
 def train_reader(net: PlateCNN, cameras: list[Camera | None], budget: ReaderBudget, spread_px: float,
                  psf_half_px: int, fmt: str, seed: int, held_out: dict[int, PlateBatch]) -> FitCurve:
     """Train ``net`` in place on plates through ``cameras`` (taken in turn, one per batch), stopping
@@ -175,11 +186,7 @@ def train_reader(net: PlateCNN, cameras: list[Camera | None], budget: ReaderBudg
 def _train(net: PlateCNN, cameras: list[Camera | None], budget: ReaderBudget, spread_px: float,
            psf_half_px: int, fmt: str, seed: int, held_out: dict[int, PlateBatch]) -> FitCurve:
     rng, generator = np.random.default_rng([seed, 0]), torch.Generator().manual_seed(seed)
-    optimizer = torch.optim.AdamW(net.parameters(), lr=budget.lr, weight_decay=1e-4)
-    warmup, total = max(1, budget.max_steps // 10), max(budget.max_steps, 1)
-    schedule = torch.optim.lr_scheduler.LambdaLR(
-        optimizer, lambda s: min(1.0, (s + 1) / warmup) * 0.5 * (1.0 + math.cos(math.pi * min(s, total) / total)))
-    criterion = nn.CrossEntropyLoss(label_smoothing=0.05)
+    optimizer, schedule, criterion = optimiser(net, budget)
     curve = FitCurve([], [], [], "budget", False, 0.0)
     best: dict[str, Tensor] | None = None  # the weights of the best evaluation so far
     t0 = time.perf_counter()
@@ -210,10 +217,10 @@ def _train(net: PlateCNN, cameras: list[Camera | None], budget: ReaderBudget, sp
         if (step + 1) % budget.eval_every == 0 or step + 1 == budget.max_steps:
             evaluate(step + 1)
             bar.set_postfix(held_out=f"{curve.accuracy[-1]:.3f}")
-            if step + 1 >= budget.min_steps and _flattened(curve.accuracy, budget):
+            if step + 1 >= budget.min_steps and flattened(curve.accuracy, budget):
                 curve.stopped = "flattened"
                 break
-    curve.still_rising = curve.stopped == "budget" and _gain(curve.accuracy, budget.patience) >= budget.min_gain
+    curve.still_rising = curve.stopped == "budget" and held_out_gain(curve.accuracy, budget.patience) >= budget.min_gain
     curve.seconds = round(time.perf_counter() - t0, 1)
     if best is not None and curve.best_step != curve.steps[-1]:
         net.load_state_dict(best)
@@ -239,12 +246,12 @@ def training_batch(camera: Camera | None, budget: ReaderBudget, rng: np.random.G
     return torch.cat([p.crops for p in parts]), torch.cat([p.labels for p in parts])
 
 
-def _gain(accuracy: list[float], patience: int) -> float:
+def held_out_gain(accuracy: list[float], patience: int) -> float:
     """How much the last ``patience`` evaluations raised the best accuracy seen before them."""
     if len(accuracy) <= patience:
         return float("inf") if accuracy else 0.0
     return max(accuracy[-patience:]) - max(accuracy[:-patience])
 
 
-def _flattened(accuracy: list[float], budget: ReaderBudget) -> bool:
-    return len(accuracy) > budget.patience and _gain(accuracy, budget.patience) < budget.min_gain
+def flattened(accuracy: list[float], budget: ReaderBudget) -> bool:
+    return len(accuracy) > budget.patience and held_out_gain(accuracy, budget.patience) < budget.min_gain

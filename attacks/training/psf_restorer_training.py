@@ -51,7 +51,7 @@ from attacks.training.restorer_training import negative_psnr
 log = logging.getLogger(__name__)
 
 __all__ = ["FINE_TUNE_FIRST_EVAL", "FINE_TUNE_LR", "PSF_BUDGETS", "PretrainCurve", "PsfPretrainBudget", "build_network",
-           "centre", "fine_tune", "pretrain", "psf_budget", "psf_inputs"]
+           "centre", "fine_tune", "pretrain", "psf_budget", "psf_inputs", "stream_generator"]
 
 HELDOUT_SEED_OFFSET = 1_000_003  # the held-out lenses' stream (seed, this, i); training draws are (seed, index)
 _LR, _LR_MIN, _BETAS, _WEIGHT_DECAY, _GRAD_CLIP = 1e-3, 1e-7, (0.9, 0.9), 1e-3, 1.0
@@ -136,7 +136,7 @@ def psf_inputs(sensor: Tensor, otf: OtfCache, gain: Tensor) -> Tensor:
     return torch.cat([(deblurred / g).clamp(0.0, 1.0), (sensor / g).clamp(0.0, 1.0)], dim=1)
 
 
-def _generator(*parts: int) -> torch.Generator:
+def stream_generator(*parts: int) -> torch.Generator:
     """A generator seeded by a hash of ``parts`` (non-negative integers): one stream per (seed, index)."""
     state = np.random.SeedSequence([int(p) for p in parts]).generate_state(1, np.uint64)[0]
     return torch.Generator().manual_seed(int(state) >> 1)
@@ -271,7 +271,7 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
         log.info("nafnet-known-psf pre-training resumed at step %d from %s", start, checkpoint)
 
     # Held-out set: fixed lenses of another seed stream, each on every held-out scene.
-    heldout_draws = [family.draw(_generator(seed, HELDOUT_SEED_OFFSET, i)) for i in range(budget.heldout_lenses)]
+    heldout_draws = [family.draw(stream_generator(seed, HELDOUT_SEED_OFFSET, i)) for i in range(budget.heldout_lenses)]
     heldout = [(centre(_render(family, d, heldout_scenes, 10_000 * (i + 1))), centre(heldout_scenes))
                for i, d in enumerate(heldout_draws)]
     curve.heldout = [d.describe() for d in heldout_draws]
@@ -279,7 +279,7 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
 
 
     def refresh(index: int) -> tuple[Tensor, Tensor]:
-        g = _generator(seed, index, 0)
+        g = stream_generator(seed, index, 0)
         drawn = family.draw(g)
         chosen = torch.randperm(scenes.shape[0], generator=g)[:budget.images_per_lens]
         return _render(family, drawn, scenes[chosen], 1_000_000 + index * 1000), scenes[chosen]
@@ -297,7 +297,7 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
         if step != start and step % budget.refresh_every == 0:
             pool = pool[1:] + [refresh(step // budget.refresh_every + budget.pool_lenses - 1)]
         loss = _train_step(model, optimizer, schedule, pool, budget.batch_size, budget.crop_px,
-                           _generator(seed, step, 1), device)
+                           stream_generator(seed, step, 1), device)
         bar.set_postfix(psnr_db=f"{-loss:.2f}")
         if (step + 1) % budget.eval_every == 0 or step + 1 == budget.max_steps:
             score = _heldout_psnr(model, heldout, device)
@@ -373,7 +373,7 @@ def fine_tune(model: NAFNet, inputs: Tensor, targets: Tensor, heldout_inputs: Te
     pool = [(inputs, targets)]
     model.to(memory_format=torch.channels_last).train()
     for step in range(max_steps):
-        _train_step(model, optimizer, schedule, pool, batch_size, crop_px, _generator(seed, step, 2), device)
+        _train_step(model, optimizer, schedule, pool, batch_size, crop_px, stream_generator(seed, step, 2), device)
         if step + 1 == next_eval:
             evaluate(step + 1)
             gain = curve.heldout_psnr_db[-1] - curve.heldout_psnr_db[-2]

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -38,7 +37,8 @@ from attacks.networks.plate_cnn import PlateCNN
 from attacks.readers.plates.plate_sim import PlateBatch, psf_radius_px
 from attacks.training.lens_family import FamilyLens, LensFamily
 from attacks.training.plate_reader_training import (
-    FitCurve, ReaderBudget, held_out_set, plate_accuracy, slot_loss, training_batch)
+    FitCurve, ReaderBudget, flattened, held_out_gain, held_out_set, optimiser, plate_accuracy, slot_loss, training_batch)
+from attacks.training.psf_restorer_training import stream_generator
 
 __all__ = ["FAMILY_BUDGET", "FamilyCamera", "family_camera", "family_held_out", "pretrain_family"]
 
@@ -87,16 +87,12 @@ def family_camera(family: LensFamily, drawn: FamilyLens) -> FamilyCamera:
     return FamilyCamera(drawn, camera, psf_radius_px(psf), psf.shape[-1] // 2)
 
 
-def _generator(*parts: int) -> torch.Generator:
-    return torch.Generator().manual_seed(int(np.random.SeedSequence(list(parts)).generate_state(1, np.uint64)[0] >> 1))
-
-
 def family_held_out(family: LensFamily, budget: FamilyBudget, fmt: str, seed: int
                     ) -> list[tuple[FamilyLens, dict[int, PlateBatch]]]:
     """The fixed held-out sets: per held-out lens (another seed stream), its plates per width bin."""
     out = []
     for i in range(budget.heldout_lenses):
-        through = family_camera(family, family.draw(_generator(seed, HELDOUT_SEED_OFFSET, i)))
+        through = family_camera(family, family.draw(stream_generator(seed, HELDOUT_SEED_OFFSET, i)))
         out.append((through.drawn, held_out_set(through.camera, budget.steps, through.spread_px, through.psf_half_px,
                                                 fmt, seed + 101 * (i + 1))))
     return out
@@ -133,11 +129,7 @@ def pretrain_family(net: PlateCNN, fmt: str, seed: int, budget: FamilyBudget = F
 def _pretrain(net: PlateCNN, fmt: str, seed: int, budget: FamilyBudget, checkpoint: Path | None, family: LensFamily,
               progress: Callable[[str], None] | None) -> tuple[FitCurve, list[dict[str, Any]]]:
     steps = budget.steps
-    optimizer = torch.optim.AdamW(net.parameters(), lr=steps.lr, weight_decay=1e-4)
-    warmup, total = max(1, steps.max_steps // 10), max(steps.max_steps, 1)
-    schedule = torch.optim.lr_scheduler.LambdaLR(
-        optimizer, lambda s: min(1.0, (s + 1) / warmup) * 0.5 * (1.0 + math.cos(math.pi * min(s, total) / total)))
-    criterion = nn.CrossEntropyLoss(label_smoothing=0.05)
+    optimizer, schedule, criterion = optimiser(net, steps)
     held_out = family_held_out(family, budget, fmt, seed)
     described = [d.describe() for d, _ in held_out]
     curve, best, start = FitCurve([], [], [], "budget", False, 0.0), None, 0
@@ -158,8 +150,7 @@ def _pretrain(net: PlateCNN, fmt: str, seed: int, budget: FamilyBudget, checkpoi
         if best is None or curve.accuracy[-1] > max(curve.accuracy[:-1]):
             best, curve.best_step = {k: v.detach().clone() for k, v in net.state_dict().items()}, step
         curve.seconds = round(time.perf_counter() - t0, 1)
-        flat = step >= steps.min_steps and len(curve.accuracy) > steps.patience and (
-            max(curve.accuracy[-steps.patience:]) - max(curve.accuracy[:-steps.patience]) < steps.min_gain)
+        flat = step >= steps.min_steps and flattened(curve.accuracy, steps)
         line = (f"step {step}/{steps.max_steps}: held-out {curve.accuracy[-1]:.3f} ("
                 + ", ".join(f"{w} px {a:.2f}" for w, a in per_width.items()) + f"), {curve.seconds:.0f} s")
         if checkpoint is not None:
@@ -184,8 +175,8 @@ def _pretrain(net: PlateCNN, fmt: str, seed: int, budget: FamilyBudget, checkpoi
         if flat:
             curve.stopped = "flattened"
             break
-        g = _generator(seed, step)
-        torch.manual_seed(int(torch.randint(0, 2**62, (1,), generator=_generator(seed, step, 2))))  # dropout's draws
+        g = stream_generator(seed, step)
+        torch.manual_seed(int(torch.randint(0, 2**62, (1,), generator=stream_generator(seed, step, 2))))  # dropout's draws
         through = family_camera(family, family.draw(g))
         rng = np.random.default_rng([seed, step, 1])
         crops, labels = training_batch(through.camera, steps, rng, g, through.spread_px, fmt, through.psf_half_px)
@@ -202,9 +193,8 @@ def _pretrain(net: PlateCNN, fmt: str, seed: int, budget: FamilyBudget, checkpoi
                 curve.stopped = "flattened"
                 break
     bar.close()
-    window = curve.accuracy[-steps.patience:]
     curve.still_rising = curve.stopped == "budget" and len(curve.accuracy) > steps.patience and (
-        max(window) - max(curve.accuracy[:-steps.patience]) >= steps.min_gain)
+        held_out_gain(curve.accuracy, steps.patience) >= steps.min_gain)
     if best is not None:
         net.load_state_dict(best)
     net.eval()

@@ -24,8 +24,9 @@ from safetensors.torch import save as save_safetensors
 import lenses
 from attacks.training.degradations import degrade
 from attacks.restorers.gray_world import gray_world_balance
-from attacks.readers.learned_reader import LearnedReader, family_key, pack_weights, pretrain, pretrained_key, unpack_weights
-from attacks.training.reader_family_training import pretrain_family
+from attacks.readers.learned_reader import WIDTH, LearnedReader, pack_weights, pretrain, pretrained_key, unpack_weights
+from attacks.training.lens_family import LensFamily
+from attacks.training.reader_family_training import FAMILY_BUDGET, pretrain_family
 from common.plate_render import PLATE_FORMAT
 from attacks.restorers.nafnet_generic import NafnetGeneric
 from attacks.restorers.nafnet_known_psf import PRETRAIN_SEED, SHIPPED_SCENES, NafnetKnownPSF, pack, shipped_key
@@ -82,6 +83,13 @@ def ship_reader(args: argparse.Namespace) -> int:
           + ", ".join(f"{w} px {a:.2f}" for w, a in curve.per_width[curve.kept].items())
           + f" after {curve.steps[-1]} steps ({curve.stopped}{', still rising' if curve.still_rising else ''})")
     return 0
+
+
+def family_key(fmt: str, seed: int = 0) -> dict[str, Any]:
+    """The key the learned reader's family pre-training is shipped under: it continues the sharp start."""
+    return {"attack": LearnedReader.name, "stage": "pretrained-family", "format": fmt, "width": WIDTH,
+            "budget": FAMILY_BUDGET.to_dict(), "family": LensFamily().describe(), "start": pretrained_key(fmt, seed),
+            "seed": seed}
 
 
 def ship_reader_family(args: argparse.Namespace) -> int:

@@ -127,7 +127,7 @@ def measure_lens(name: str, family_weights: Path | None = None, seed: int = 0) -
                 for i in ids}
     with_psf = {i: (int(ensemble[i][0] or ours["learned-reader-psf"][i][0]), ensemble[i][1]) for i in ids}
     best = max((a for a in published if a != "learned-reader"), key=lambda a: sum(hits(published[a], readable)))
-    table = {**{k: v for k, v in ours.items()}, "learned-reader": published["learned-reader"],
+    table = {**ours, "learned-reader": published["learned-reader"],
              f"best published chain ({best})": published[best], "published ensemble": ensemble,
              "published ensemble + learned-reader-psf": with_psf}
     record: dict[str, Any] = {

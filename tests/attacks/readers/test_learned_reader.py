@@ -13,7 +13,7 @@ import attacks
 import lenses
 from attacks.readers.learned_reader import LearnedReader, pretrained_key
 import attacks.training.plate_reader_training as reader_training
-from attacks.training.plate_reader_training import (FitCurve, ReaderBudget, _flattened, _gain, plate_accuracy, train_reader,
+from attacks.training.plate_reader_training import (FitCurve, ReaderBudget, flattened, held_out_gain, plate_accuracy, train_reader,
                                          training_batch, width_bands)
 from common.plate_render import PLATE_FORMAT
 from attacks.readers.plates.plate_sim import CROP_HW, crop_margin_px, plate_crops, psf_radius_px, simulate_plates
@@ -106,10 +106,10 @@ def test_bands_per_batch_is_checked_and_left_out_of_keys_made_before_it():
 def test_the_stop_rule_flattens_and_flags_a_rising_fit():
     budget = ReaderBudget(max_steps=10, batch_size=2, lr=1e-3, widths_px=(30, 60), eval_every=1, eval_plates=1,
                           patience=2, min_gain=0.01)
-    assert _gain([0.1, 0.5, 0.5, 0.505], 2) == pytest.approx(0.005)
-    assert _flattened([0.1, 0.5, 0.5, 0.505], budget)        # two evaluations gained < 1 point
-    assert not _flattened([0.1, 0.3, 0.5, 0.6], budget)      # still climbing
-    assert not _flattened([0.1, 0.5], budget)                # too few evaluations to tell
+    assert held_out_gain([0.1, 0.5, 0.5, 0.505], 2) == pytest.approx(0.005)
+    assert flattened([0.1, 0.5, 0.5, 0.505], budget)        # two evaluations gained < 1 point
+    assert not flattened([0.1, 0.3, 0.5, 0.6], budget)      # still climbing
+    assert not flattened([0.1, 0.5], budget)                # too few evaluations to tell
     # A fit that runs out of steps while climbing is flagged; one that flattened is not.
     net = LearnedReader.build(PLATE_FORMAT, 0)
     held = {32: simulate_plates(None, 2, (32, 32), np.random.default_rng(0), torch.Generator().manual_seed(0), 0.0,

@@ -11,7 +11,8 @@ import torch
 from attacks.readers.learned_reader import LearnedReader
 from attacks.training.lens_family import LensFamily
 from attacks.training.plate_reader_training import ReaderBudget, held_out_set, train_reader
-from attacks.training.reader_family_training import HELDOUT_SEED_OFFSET, FamilyBudget, _generator, pretrain_family
+from attacks.training.psf_restorer_training import stream_generator
+from attacks.training.reader_family_training import HELDOUT_SEED_OFFSET, FamilyBudget, pretrain_family
 
 FMT = "LLDDDLL"
 TINY = FamilyBudget(ReaderBudget(max_steps=4, batch_size=8, lr=1e-3, widths_px=(24.0, 64.0), eval_every=2,
@@ -68,8 +69,8 @@ def test_a_resumed_pretraining_continues_exactly(tmp_path):
 
 def test_the_held_out_lenses_are_not_training_draws():
     family = LensFamily()
-    held = [family.draw(_generator(0, HELDOUT_SEED_OFFSET, i)).describe() for i in range(6)]
-    trained = [family.draw(_generator(0, step)).describe() for step in range(500)]
+    held = [family.draw(stream_generator(0, HELDOUT_SEED_OFFSET, i)).describe() for i in range(6)]
+    trained = [family.draw(stream_generator(0, step)).describe() for step in range(500)]
     assert not any(h == t for h in held for t in trained)
 
 
