@@ -265,6 +265,9 @@ def build_parser() -> argparse.ArgumentParser:
     mask.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
                       help="a co-designed lens's training profile: %(choices)s (default: quick)")
     mask.add_argument("--seed", type=int, default=0, help="a co-designed lens's training seed (default 0)")
+    mask.add_argument("--train", action="store_true",
+                      help="co-design the lens first when neither the cache nor the package holds it "
+                           "(minutes; without it such a lens is refused)")
     study = sub.add_parser("study", help="measure a modelling-choice study into leaderboard/studies/ and re-render")
     study.add_argument("name", choices=["psf-grid", "utility-size"],
                        help="psf-grid: PSF support, pupil grid, oversampling vs error and time; "
@@ -535,10 +538,11 @@ def cmd_study(args: argparse.Namespace) -> int:
     return 0
 
 
-def mask_spec(name: str, profile: str, seed: int):
+def mask_spec(name: str, profile: str, seed: int, train: bool = False):
     """The LensSpec behind `name`: a leaderboard entry .json (its published lens spec), a .toml
-    spec, or a registered lens (a co-designed one is trained, or taken from the cache, for
-    `profile` and `seed`) with its current coefficients."""
+    spec, or a registered lens with its current coefficients. A co-designed one is taken from the
+    cache (or the package's shipped copy) for `profile` and `seed`; one held by neither is trained
+    only with `train` (else a LookupError says how to get it)."""
     import lenses
     from benchmark.store.profiles import get_profile
     if name.endswith(".json"):
@@ -556,6 +560,13 @@ def mask_spec(name: str, profile: str, seed: int):
         if not spec:
             raise ValueError(f"{name}: the entry stores no lens_spec to export")
         return lenses.parse_spec(spec, source=name)
+    if not train and name in lenses.available():
+        from benchmark.codesign.codesigned_lenses import trained_run
+        if trained_run(name, get_profile(profile), seed) is False:
+            raise LookupError(f"co-designed lens {name!r} (profile {profile}, seed {seed}) is neither in the cache nor "
+                              "shipped; co-designing it takes minutes: pass --train to do it now, run "
+                              f"`python -m benchmark run --lens {name} --seed {seed}` first, or export a leaderboard "
+                              "entry's published mask (its .json)")
     return lenses.load(name, profile=get_profile(profile), seed=seed).current_spec()
 
 
@@ -567,7 +578,7 @@ def cmd_export_mask(args: argparse.Namespace) -> int:
     if args.out.is_dir():
         raise ValueError(f"--out {str(args.out)!r} is a folder; give the file to write, e.g. "
                          f"{args.out / ('mask.' + args.fmt.replace('zemax-gridsag', 'dat'))}")
-    spec = mask_spec(args.lens, args.profile, args.seed)
+    spec = mask_spec(args.lens, args.profile, args.seed, args.train)
     heights = height_map(spec, args.samples)
     written = write_height_map(heights, args.out, args.fmt)
     meta = heights.metadata

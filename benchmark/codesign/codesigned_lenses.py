@@ -37,6 +37,18 @@ def codesigned(scheme: str, profile: Any = None, seed: int = 0, device: str = "c
     return attach(run.load_or_train(progress=progress))
 
 
+def trained_run(scheme: str, profile: Any, seed: int = 0, cache_dir: Path | None = None,
+                scenes: str = "synthetic") -> bool | None:
+    """Whether the cache (or the package's shipped copy) holds the finished co-design of `scheme` for
+    this profile, seed and scenes, without training anything; None when `scheme` is not co-designed."""
+    from benchmark.store.cache import cache_root
+    if scheme not in SCHEMES:
+        return None
+    run = CoDesign(load_spec(START_SPEC), SCHEMES[scheme], profile, seed, "cpu",
+                   Path(cache_dir) if cache_dir else cache_root(), scene_set=scenes)
+    return run.load() is not None
+
+
 def os_lens(**kw: Any) -> Lens:
     return codesigned("os", **kw)
 

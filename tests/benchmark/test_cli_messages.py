@@ -202,3 +202,17 @@ def test_a_cache_that_cannot_be_written_is_a_sentence_naming_it(tmp_path):
                           timeout=300)
     assert done.returncode == 2, done.stderr[-2000:]
     assert "error: cannot use " + str(blocker) in done.stderr and "Traceback" not in done.stderr
+
+
+def test_export_mask_refuses_to_co_design_an_uncached_lens_without_train(tmp_path, monkeypatch, capsys):
+    """A co-designed lens the cache and the package do not hold is refused (nothing trained, nothing
+    written to the cache); the shipped gp seed 0 still exports without --train."""
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("PLB_CACHE", str(cache))
+    assert cli.main(["export-mask", "gp", "--seed", "7", "--format", "npy", "--out", str(tmp_path / "m7.npy")]) == 2
+    err = capsys.readouterr().err
+    assert "'gp' (profile quick, seed 7) is neither in the cache nor shipped" in err and "--train" in err
+    assert not (tmp_path / "m7.npy").exists()
+    assert not any(p.is_file() for p in cache.rglob("*"))
+    assert cli.main(["export-mask", "gp", "--format", "npy", "--out", str(tmp_path / "m0.npy"), "--samples", "9"]) == 0
+    assert (tmp_path / "m0.npy").is_file()
