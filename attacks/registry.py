@@ -13,7 +13,9 @@ import dataclasses
 import hashlib
 import importlib.util
 import logging
+import re
 import sys
+from collections.abc import Callable
 from importlib.metadata import EntryPoint
 from pathlib import Path
 
@@ -31,6 +33,7 @@ __all__ = [
     "import_from_file",
     "load",
     "load_all",
+    "outside_suite",
     "similar",
     "source_of",
     "suggest",
@@ -131,12 +134,16 @@ def load(spec: str, **options: object) -> Attack:
     return _load(spec, discover(ATTACKS_GROUP), options)
 
 
-def load_all(names: list[str] | None = None) -> tuple[list[Attack], list[PluginFailure]]:
+def load_all(names: list[str] | None = None, load_outside: Callable[[str], Attack] | None = None
+             ) -> tuple[list[Attack], list[PluginFailure]]:
     """Load several attackers one at a time; those that fail are skipped, not fatal.
 
     Args:
         names: Names or file specs to load, in order; None loads every registered attacker
             in name order.
+        load_outside: Loads a file spec or an entry point of another distribution than this suite's
+            (``outside_suite``) instead of importing it here: the runner's stand-in for an attacker in a
+            process of its own. None: every attacker is imported here.
 
     Returns:
         The attackers that loaded, and one ``PluginFailure`` per attacker that raised while
@@ -158,10 +165,16 @@ def load_all(names: list[str] | None = None) -> tuple[list[Attack], list[PluginF
     for spec in requested:
         kind = None
         try:
-            obj, origin, registered_name = _import(spec, registered)
-            if isinstance(obj, type):
-                kind = "reader" if issubclass(obj, Reader) else "restorer" if issubclass(obj, Restorer) else None
-            attacker = _checked_class(obj, origin, registered_name)()
+            if load_outside is not None and outside_suite(spec, registered):
+                attacker = load_outside(spec)
+                if spec in registered and attacker.name != spec:
+                    raise TypeError(f"{_origin(spec, registered)}: registered as {spec!r} but its class attribute "
+                                    f"name is {attacker.name!r}; they must match (results are keyed by it)")
+            else:
+                obj, origin, registered_name = _import(spec, registered)
+                if isinstance(obj, type):
+                    kind = "reader" if issubclass(obj, Reader) else "restorer" if issubclass(obj, Restorer) else None
+                attacker = _checked_class(obj, origin, registered_name)()
         except (UnknownPluginError, KeyboardInterrupt):  # a typo by the caller; the user's own Ctrl-C
             raise
         except BaseException as exc:  # noqa: BLE001 - any plugin bug, a SystemExit too, must not take the run down
@@ -172,6 +185,21 @@ def load_all(names: list[str] | None = None) -> tuple[list[Attack], list[PluginF
         _check_unique(attacker.name, _origin(spec, registered), sources, registered)
         loaded.append(attacker)
     return loaded, failures
+
+
+SUITE_DISTRIBUTION = "privacy-lens-bench"
+
+
+def outside_suite(spec: str, registered: dict[str, EntryPoint]) -> bool:
+    """Whether `spec` names a plugin not shipped with this suite: a file spec, or an entry point of
+    another distribution (an unknown name is not: it is an error)."""
+    if _is_file_spec(spec):
+        return True
+    ep = registered.get(spec)
+    if ep is None:
+        return False
+    dist = getattr(ep, "dist", None)
+    return dist is None or re.sub(r"[-_.]+", "-", dist.name).lower() != SUITE_DISTRIBUTION
 
 
 def _origin(spec: str, registered: dict[str, EntryPoint]) -> str:

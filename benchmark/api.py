@@ -42,6 +42,7 @@ from benchmark.store.provenance import git_commit
 from benchmark.runner.config import LensFile, RunConfig, training_scenes
 from benchmark.scenes import PLATE_FORMAT, SCENE_SETS, load_scenes, plate_entropy_bits
 from benchmark.runner.defaults import STANDARD_ENSEMBLE
+from benchmark.runner.sandbox import ISOLATED
 from benchmark.results.observer.published import fail_above_ceiling, load_study, run_violations
 from benchmark.results.schema import Row, read_results, write_results
 from benchmark.results.schema import Results as ResultsFile
@@ -171,7 +172,7 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         plate_format: str | None = None, frames: int = 30, budget_s: float | None = None,
         all_chains: bool = False, meta: Mapping[str, Any] | None = None,
         on_task: Callable[[Task], None] | None = None, sealed: bool = False,
-        scene_seeds: Mapping[int, int] | None = None) -> Results:
+        scene_seeds: Mapping[int, int] | None = None, isolate: bool | None = None) -> Results:
     """Benchmark `lenses` against `attacks`; the CLI's `run` with the same meanings.
 
     Args:
@@ -201,6 +202,11 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
             attackers ran; `scene_seeds` re-runs them.
         scene_seeds: The val scene seed of each run seed (a sealed run's, to reproduce it); None: the
             run seeds themselves (or random ones with `sealed`).
+        isolate: Run each attacker not shipped with the suite (a file spec, another distribution's entry
+            point) in a process of its own, handed only what its threat model grants: its code cannot
+            reach the runner's scenes, plate texts or scoring (``benchmark.runner.sandbox``). None: as
+            `sealed` (a sealed run is the one for such plugins). Objects passed as attackers stay in
+            this process.
 
     Returns:
         `Results`; `Results.table()` is the DataFrame.
@@ -213,8 +219,9 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
     _check_meta(meta)
     if out is not None and not isinstance(out, (str, Path)):
         raise TypeError(f"out must be a folder path (str or pathlib.Path) or None, got {type(out).__name__} {out!r}")
+    isolated = isolating(sealed, isolate)
     cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames,
-                                budget_s, all_chains)
+                                budget_s, all_chains, isolate=isolated)
     cfg.scene_seeds = _scene_seeds(cfg.seeds, sealed, scene_seeds)
     folder, created = prepare_out(Path(out)) if out is not None else (None, False)
     log.info("profile %s: %s", cfg.profile.name, cfg.profile.to_dict())
@@ -228,6 +235,8 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         raise
     run_meta = {**(meta or {}), "profile": cfg.profile.to_dict(), "executor": executor,
                 "wall_s": time.perf_counter() - t0}
+    if isolated:
+        run_meta["isolated"] = True
     if cfg.scene_seeds:  # written only now, after every attacker ran
         run_meta.update(sealed=bool(sealed), scene_seeds={str(k): v for k, v in sorted(cfg.scene_seeds.items())})
     output.rows = fail_above_ceiling(output.rows, run_violations(output.plates, output.lens_info, load_study())["violations"])
@@ -239,9 +248,16 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
     return results
 
 
+def isolating(sealed: bool, isolate: bool | None) -> bool:
+    """Whether a run isolates the attackers not shipped with the suite: as asked, else when it is sealed."""
+    if isolate is not None and not isinstance(isolate, bool):
+        raise TypeError(f"isolate must be True, False or None, got {isolate!r}")
+    return sealed is True if isolate is None else isolate
+
+
 def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike] | None, profile: str | Profile,
                seeds: int | Sequence[int], scenes: str, device: str, executor: str, plate_format: str | None,
-               frames: int, budget_s: float | None, all_chains: bool = False
+               frames: int, budget_s: float | None, all_chains: bool = False, isolate: bool = False
                ) -> tuple[RunConfig, runner.Selection]:
     """Check every argument (before any compute) and choose the attackers (and with `attacks` None and
     not `all_chains`, the standard ensemble's chains)."""
@@ -271,7 +287,8 @@ def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike
     if not isinstance(all_chains, bool):
         raise TypeError(f"all_chains must be True or False, got {all_chains!r}")
     standard = requested is None and not all_chains
-    selection = select_attackers(runner.standard_attackers() if standard else requested, remote=executor != "local")
+    selection = select_attackers(runner.standard_attackers() if standard else requested, remote=executor != "local",
+                                 isolate=isolate)
     cfg = RunConfig(lenses=names, attacks=[r.spec for r in selection.restorers + selection.readers],
                     scenes=scenes, profile=p, seeds=_seeds(seeds), device=check_device(device),
                     plate_format=plate_format, frames=frames, budget_s=budget_s,
@@ -328,7 +345,8 @@ def _is_registered_spec(name: str, entry_point: str, spec: lenses.LensSpec) -> b
     return lenses.load(name).spec.to_dict() == spec.to_dict()
 
 
-def select_attackers(requested: Sequence[AttackerLike] | None, remote: bool) -> runner.Selection:
+def select_attackers(requested: Sequence[AttackerLike] | None, remote: bool, isolate: bool = False
+                     ) -> runner.Selection:
     """The run's attackers from names, file specs and attacker objects, in the order given.
 
     Names go through `runner.select_attackers` (an unknown name is an error, a plugin that fails
@@ -340,7 +358,7 @@ def select_attackers(requested: Sequence[AttackerLike] | None, remote: bool) -> 
         attacker_objects.AttackerTransportError: `remote` and an object cannot travel.
     """
     if requested is None:
-        return runner.select_attackers(None)
+        return runner.select_attackers(None, isolate)
     if isinstance(requested, (str, type, attacks.Attack)):
         requested = [requested]
     for item in requested:
@@ -352,10 +370,11 @@ def select_attackers(requested: Sequence[AttackerLike] | None, remote: bool) -> 
     failures: list[attacks.PluginFailure] = []
     kinds: dict[str, str] = {}
     if named:
-        chosen = runner.select_attackers(named)
+        chosen = runner.select_attackers(named, isolate)
         failures += chosen.failures
-        by_spec.update({r.spec: r for r in chosen.restorers + chosen.readers})
-        kinds.update({r.spec: "restorer" for r in chosen.restorers})
+        # keyed by the spec as given (an isolated attacker's ref carries it behind sandbox.ISOLATED)
+        by_spec.update({r.spec.removeprefix(ISOLATED): r for r in chosen.restorers + chosen.readers})
+        kinds.update({r.spec.removeprefix(ISOLATED): "restorer" for r in chosen.restorers})
     restorers: list[AttackerRef] = []
     readers: list[AttackerRef] = []
     sources: dict[str, str] = {}  # attacker name -> where it came from
@@ -512,15 +531,18 @@ class Plan:
 def plan(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = None, *,
          profile: str | Profile = "quick", seeds: int | Sequence[int] = (0,), scenes: str = "synthetic",
          device: str = "cpu", executor: str = "local", plate_format: str | None = None,
-         frames: int = 30, budget_s: float | None = None, all_chains: bool = False) -> Plan:
+         frames: int = 30, budget_s: float | None = None, all_chains: bool = False, isolate: bool = False) -> Plan:
     """The dry run of `run` with the same arguments: its tasks, which are cached, what each costs.
 
-    Computes nothing and writes nothing (the attackers are constructed, to know their kinds).
+    Computes nothing and writes nothing (the attackers are constructed, to know their kinds: with
+    `isolate`, a plugin not shipped with the suite in a process of its own).
     A task's cost is the median wall time measured for the same work (kind, lens, attackers,
     profile settings, scenes, device; any seed) in the cache, or unknown.
     """
+    if not isinstance(isolate, bool):
+        raise TypeError(f"isolate must be True or False, got {isolate!r}")
     cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames,
-                                budget_s, all_chains)
+                                budget_s, all_chains, isolate=isolate)
     directory = run_directory(cfg, selection.restorers, selection.readers)
     measured = task_costs.measurements(cfg.cache_dir)
     kind = None if attacks is not None else "all-chains" if all_chains else "standard"

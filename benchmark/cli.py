@@ -164,6 +164,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="draw the val scenes of each seed from a random seed no attacker is given, written with "
                           "the results after the attackers ran (for plugins not shipped with the suite: one "
                           "cannot rebuild the test scenes beforehand); not publishable")
+    run.add_argument("--isolate", action="store_true",
+                     help="run each attacker not shipped with the suite (a file spec, another package's entry point) "
+                          "in a process of its own, handed only what its threat model grants (on with --sealed)")
     run.add_argument("--scene-seeds", type=_scene_seeds, default=None, metavar="RUN=SCENE,...",
                      help="re-run a sealed run: its scene seeds (results.json meta \"scene_seeds\")")
     run.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
@@ -424,7 +427,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     options = dict(lenses=args.lens, attacks=args.attack, profile=args.profile, seeds=args.seeds,
                    scenes=args.scenes, device=args.device, executor=args.executor,
                    plate_format=args.plate_format, frames=args.frames, budget_s=args.budget_s,
-                   all_chains=args.all_chains)
+                   all_chains=args.all_chains, isolate=args.isolate or args.sealed)
     if args.dry_run:
         print(api.plan(**options).render())
         return 0

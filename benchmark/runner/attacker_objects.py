@@ -28,6 +28,7 @@ from collections.abc import Callable
 import attacks
 from benchmark.store.cache import config_hash
 from benchmark.runner.planning import AttackerRef
+from benchmark.runner.sandbox import ISOLATED, isolated
 
 IN_PROCESS = "in-process:"
 
@@ -142,7 +143,10 @@ def reference(item: type | attacks.Attack, remote: bool) -> tuple[AttackerRef, a
 
 
 def load(spec: str) -> attacks.Attack:
-    """The attacker of a task's spec: in-process object, `module:QualName`, file spec or registered name."""
+    """The attacker of a task's spec: isolated (``sandbox.ISOLATED`` + a name or file spec: a stand-in for
+    the attacker in its own process), in-process object, `module:QualName`, file spec or registered name."""
+    if spec.startswith(ISOLATED):
+        return isolated(spec[len(ISOLATED):])
     if spec.startswith(IN_PROCESS):
         try:
             return _REGISTERED[spec]()

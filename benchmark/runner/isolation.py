@@ -45,6 +45,7 @@ import torch
 
 import attacks
 from benchmark.runner.budget import time_budget
+from benchmark.runner.sandbox import live_pids
 from benchmark.results.entries import LEADERBOARD
 from benchmark.results.schema import RowError
 from benchmark.store.cache import ArtifactCache, config_hash, discard
@@ -222,7 +223,7 @@ class Leftovers:
 
     def clean_up(self, attacker: str, stage: str) -> None:
         """End the children the call left alive and remember its non-daemon threads (logged)."""
-        children = child_pids() - self.children
+        children = child_pids() - self.children - live_pids()  # an isolated attacker's own process stays
         if children:
             log.warning("attacker %r left %d child process(es) running after %s (pid %s); ending them", attacker,
                         len(children), stage, ", ".join(map(str, sorted(children))))

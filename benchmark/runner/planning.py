@@ -16,6 +16,7 @@ from pathlib import Path
 from benchmark.store.cache import config_hash
 from benchmark.store.provenance import code_version
 from benchmark.runner.config import RunConfig
+from benchmark.runner.sandbox.proxies import ISOLATED
 
 TASK_VERSION = 2
 
@@ -34,8 +35,10 @@ class AttackerRef:
 
     @property
     def identity(self) -> str:
-        """What keys the run's cache: the name, and the settings key of an attacker given as an object."""
-        return f"{self.name}@{self.settings_key}" if self.settings_key else self.name
+        """What keys the run's cache: the name, the settings key of an attacker given as an object, and
+        whether it runs isolated (results computed with a plugin in the runner's process are not reused)."""
+        name = f"{ISOLATED}{self.name}" if self.spec.startswith(ISOLATED) else self.name
+        return f"{name}@{self.settings_key}" if self.settings_key else name
 
 
 @dataclass(frozen=True)

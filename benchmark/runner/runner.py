@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import attacks
-from benchmark.runner import executors
+from benchmark.runner import executors, sandbox
 from benchmark.runner.planning import AttackerRef, Task, plan, run_directory
 from benchmark.runner.tasks import TaskResult
 from benchmark.store.provenance import provenance
@@ -50,18 +50,26 @@ class Selection:
     failures: list[attacks.PluginFailure]
 
 
-def select_attackers(requested: list[str] | None) -> Selection:
+def select_attackers(requested: list[str] | None, isolate: bool = False) -> Selection:
     """Load the requested attackers (None: every registered one run by default), one at a time.
+
+    isolate: a plugin not shipped with the suite (a file spec, another distribution's entry point) is
+    loaded in a process of its own (``sandbox``), here to learn its name and kind, and in every task it
+    runs in (its spec is ``sandbox.ISOLATED`` + the spec); it is never imported into the runner.
 
     Raises:
         UnknownAttackError: a requested name is not registered (a typo, not a broken plugin).
         DuplicatePluginError: two attackers of the run share a name; the message names both sources.
     """
-    selected, failures = attacks.load_all(requested)
+    selected, failures = attacks.load_all(requested, load_outside=sandbox.isolated if isolate else None)
     failed = {f.name for f in failures}
     # load_all keeps the order of the request: the i-th attacker that loaded came from the i-th spec that did.
     specs = [a.name for a in selected] if requested is None else [s for s in dict.fromkeys(requested)
                                                                    if s not in failed]
+    for a in selected:  # each task loads its own: a stand-in's process ends here
+        if sandbox.is_stand_in(a):
+            a.close()  # type: ignore[attr-defined]
+    specs = [sandbox.ISOLATED + spec if sandbox.is_stand_in(a) else spec for a, spec in zip(selected, specs)]
     chosen = [(a, spec) for a, spec in zip(selected, specs) if requested is not None or a.run_by_default]
     return Selection([AttackerRef(a.name, spec) for a, spec in chosen if isinstance(a, attacks.Restorer)],
                      [AttackerRef(a.name, spec) for a, spec in chosen if isinstance(a, attacks.Reader)],

@@ -162,3 +162,35 @@ def test_a_class_missing_a_required_attribute_names_it(tmp_path, attribute, sour
     path.write_text(source)
     loaded, failures = attacks.load_all([f"{path}:X"])
     assert not loaded and attribute in failures[0].error and failures[0].kind == "restorer"
+
+
+def test_file_specs_and_other_distributions_entry_points_are_outside_the_suite_ours_are_not():
+    from importlib.metadata import EntryPoint
+
+    from attacks.registry import ATTACKS_GROUP, discover, outside_suite
+    registered = discover(ATTACKS_GROUP)
+    assert not any(outside_suite(name, registered) for name in registered)  # every built-in is ours
+    foreign = {**registered, "foreign": EntryPoint("foreign", "their_pkg.attack:Foreign", ATTACKS_GROUP)}
+    assert outside_suite("foreign", foreign)  # no distribution of ours behind it
+    assert outside_suite("plugins/mine.py:Mine", registered) and not outside_suite("no-such-name", registered)
+
+
+def test_load_all_hands_what_is_outside_the_suite_to_the_given_loader_and_imports_it_not(tmp_path):
+    plugin = tmp_path / "never_imported.py"
+    plugin.write_text("raise RuntimeError('imported into the runner')\n")
+    asked = []
+
+    class StandIn(attacks.Restorer):
+        name = "stand-in"
+        threat_model = attacks.ThreatModel.SENSOR_ACCESS
+
+        def restore(self, sensor):
+            return sensor
+
+    def load_outside(spec):
+        asked.append(spec)
+        return StandIn()
+
+    loaded, failures = attacks.load_all(["identity", f"{plugin}:X"], load_outside=load_outside)
+    assert asked == [f"{plugin}:X"] and not failures
+    assert [a.name for a in loaded] == ["identity", "stand-in"]
