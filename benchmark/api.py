@@ -172,7 +172,7 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         plate_format: str | None = None, frames: int = 30, budget_s: float | None = None,
         all_chains: bool = False, meta: Mapping[str, Any] | None = None,
         on_task: Callable[[Task], None] | None = None, sealed: bool = False,
-        scene_seeds: Mapping[int, int] | None = None, isolate: bool | None = None) -> Results:
+        scene_seeds: Mapping[int, int] | None = None, isolate: bool = True) -> Results:
     """Benchmark `lenses` against `attacks`; the CLI's `run` with the same meanings.
 
     Args:
@@ -204,9 +204,9 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
             run seeds themselves (or random ones with `sealed`).
         isolate: Run each attacker not shipped with the suite (a file spec, another distribution's entry
             point) in a process of its own, handed only what its threat model grants: its code cannot
-            reach the runner's scenes, plate texts or scoring (``benchmark.runner.sandbox``). None: as
-            `sealed` (a sealed run is the one for such plugins). Objects passed as attackers stay in
-            this process.
+            reach the runner's scenes, plate texts or scoring (``benchmark.runner.sandbox``; about 2 s
+            to start per attacker and task). False: in this process (your own plugin, under
+            development; a sealed run refuses it). Objects passed as attackers stay in this process.
 
     Returns:
         `Results`; `Results.table()` is the DataFrame.
@@ -219,9 +219,13 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
     _check_meta(meta)
     if out is not None and not isinstance(out, (str, Path)):
         raise TypeError(f"out must be a folder path (str or pathlib.Path) or None, got {type(out).__name__} {out!r}")
-    isolated = isolating(sealed, isolate)
+    if not isinstance(isolate, bool):
+        raise TypeError(f"isolate must be True or False, got {isolate!r}")
+    if sealed is True and not isolate:
+        raise ValueError("a sealed run isolates its plugins (it is the run for plugins not shipped with the suite); "
+                         "drop isolate=False")
     cfg, selection = _configure(lenses, attacks, profile, seeds, scenes, device, executor, plate_format, frames,
-                                budget_s, all_chains, isolate=isolated)
+                                budget_s, all_chains, isolate=isolate)
     cfg.scene_seeds = _scene_seeds(cfg.seeds, sealed, scene_seeds)
     folder, created = prepare_out(Path(out)) if out is not None else (None, False)
     log.info("profile %s: %s", cfg.profile.name, cfg.profile.to_dict())
@@ -235,8 +239,9 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         raise
     run_meta = {**(meta or {}), "profile": cfg.profile.to_dict(), "executor": executor,
                 "wall_s": time.perf_counter() - t0}
+    isolated = sorted(r.name for r in selection.restorers + selection.readers if r.spec.startswith(ISOLATED))
     if isolated:
-        run_meta["isolated"] = True
+        run_meta["isolated"] = isolated
     if cfg.scene_seeds:  # written only now, after every attacker ran
         run_meta.update(sealed=bool(sealed), scene_seeds={str(k): v for k, v in sorted(cfg.scene_seeds.items())})
     output.rows = fail_above_ceiling(output.rows, run_violations(output.plates, output.lens_info, load_study())["violations"])
@@ -248,16 +253,9 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
     return results
 
 
-def isolating(sealed: bool, isolate: bool | None) -> bool:
-    """Whether a run isolates the attackers not shipped with the suite: as asked, else when it is sealed."""
-    if isolate is not None and not isinstance(isolate, bool):
-        raise TypeError(f"isolate must be True, False or None, got {isolate!r}")
-    return sealed is True if isolate is None else isolate
-
-
 def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike] | None, profile: str | Profile,
                seeds: int | Sequence[int], scenes: str, device: str, executor: str, plate_format: str | None,
-               frames: int, budget_s: float | None, all_chains: bool = False, isolate: bool = False
+               frames: int, budget_s: float | None, all_chains: bool = False, isolate: bool = True
                ) -> tuple[RunConfig, runner.Selection]:
     """Check every argument (before any compute) and choose the attackers (and with `attacks` None and
     not `all_chains`, the standard ensemble's chains)."""
@@ -345,7 +343,7 @@ def _is_registered_spec(name: str, entry_point: str, spec: lenses.LensSpec) -> b
     return lenses.load(name).spec.to_dict() == spec.to_dict()
 
 
-def select_attackers(requested: Sequence[AttackerLike] | None, remote: bool, isolate: bool = False
+def select_attackers(requested: Sequence[AttackerLike] | None, remote: bool, isolate: bool = True
                      ) -> runner.Selection:
     """The run's attackers from names, file specs and attacker objects, in the order given.
 
@@ -531,7 +529,7 @@ class Plan:
 def plan(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = None, *,
          profile: str | Profile = "quick", seeds: int | Sequence[int] = (0,), scenes: str = "synthetic",
          device: str = "cpu", executor: str = "local", plate_format: str | None = None,
-         frames: int = 30, budget_s: float | None = None, all_chains: bool = False, isolate: bool = False) -> Plan:
+         frames: int = 30, budget_s: float | None = None, all_chains: bool = False, isolate: bool = True) -> Plan:
     """The dry run of `run` with the same arguments: its tasks, which are cached, what each costs.
 
     Computes nothing and writes nothing (the attackers are constructed, to know their kinds: with

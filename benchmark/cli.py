@@ -164,9 +164,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="draw the val scenes of each seed from a random seed no attacker is given, written with "
                           "the results after the attackers ran (for plugins not shipped with the suite: one "
                           "cannot rebuild the test scenes beforehand); not publishable")
-    run.add_argument("--isolate", action="store_true",
-                     help="run each attacker not shipped with the suite (a file spec, another package's entry point) "
-                          "in a process of its own, handed only what its threat model grants (on with --sealed)")
+    run.add_argument("--no-isolate", action="store_true",
+                     help="run attackers not shipped with the suite (a file spec, another package's entry point) in "
+                          "this process instead of one of their own each (faster to start, for your own plugin under "
+                          "development; refused with --sealed)")
     run.add_argument("--scene-seeds", type=_scene_seeds, default=None, metavar="RUN=SCENE,...",
                      help="re-run a sealed run: its scene seeds (results.json meta \"scene_seeds\")")
     run.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
@@ -427,7 +428,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     options = dict(lenses=args.lens, attacks=args.attack, profile=args.profile, seeds=args.seeds,
                    scenes=args.scenes, device=args.device, executor=args.executor,
                    plate_format=args.plate_format, frames=args.frames, budget_s=args.budget_s,
-                   all_chains=args.all_chains, isolate=args.isolate or args.sealed)
+                   all_chains=args.all_chains, isolate=not args.no_isolate)
     if args.dry_run:
         print(api.plan(**options).render())
         return 0
@@ -617,6 +618,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "run" and args.all_chains and args.attack:
         parser.error("--all-chains widens the default attackers; with --attack the run is exactly the attackers "
                      "named (every reader after every restorer): drop one of them")
+    if args.command == "run" and args.sealed and args.no_isolate:
+        parser.error("--sealed isolates its plugins (it is the run for plugins not shipped with the suite); "
+                     "drop --no-isolate")
     if args.command == "run" and (args.sealed or args.scene_seeds) and (args.publish or args.dry_run):
         parser.error(("--sealed" if args.sealed else "--scene-seeds") + " runs scenes other than the seeds' own: "
                      + ("a leaderboard entry is reproduced from its seeds, so it cannot be published (--publish)"

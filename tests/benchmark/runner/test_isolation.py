@@ -112,7 +112,7 @@ def runs(tmp_path_factory):
     """(killed run, its out folder, resumed run, its out folder, cache, witness file)."""
     root = tmp_path_factory.mktemp("hostile")
     (root / "p.py").write_text(HOSTILE)
-    args = ["--lens", "ideal"]
+    args = ["--lens", "ideal", "--no-isolate"]  # the guards of the runner's own process (plugins isolated: sandbox/)
     for name in ATTACKS:
         args += ["--attack", name if name == "identity" else f"{root / 'p.py'}:{name}"]
     env = {"PLB_TEST_KILLED": str(root / "killed"), "PLB_TEST_WITNESS": str(root / "witness.txt"),

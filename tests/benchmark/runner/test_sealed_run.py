@@ -59,6 +59,8 @@ def test_a_scene_seed_replaces_the_run_seed_for_the_val_scenes_and_keys_the_task
     ({"scene_seeds": {1: 5}}, "one scene seed for each run seed"),
     ({"scene_seeds": {0: -1}}, r"scene_seeds\[0\] must be an integer"),
     ({"sealed": "yes"}, "sealed must be True or False"),
+    ({"sealed": True, "isolate": False}, "a sealed run isolates its plugins"),
+    ({"isolate": "yes"}, "isolate must be True or False"),
 ])
 def test_bad_scene_seeds_are_refused_before_any_compute(kwargs, named, tmp_path):
     with pytest.raises((ValueError, TypeError), match=named):
@@ -99,14 +101,3 @@ def test_a_sealed_run_draws_a_fresh_seed_of_the_sealed_range_for_every_run_seed(
     assert all(0 <= v < 2**api.SCENE_SEED_BITS for d in draws for v in d.values())
     assert len({v for d in draws for v in d.values()}) == 9  # fresh each time, distinct across run seeds
     assert api._scene_seeds([0, 1], False, None) == {}
-
-
-@pytest.mark.parametrize("sealed, isolate, expected", [(False, None, False), (True, None, True), (False, True, True),
-                                                      (True, False, False)])
-def test_a_sealed_run_isolates_the_plugins_unless_told_otherwise(sealed, isolate, expected):
-    assert api.isolating(sealed, isolate) is expected
-
-
-def test_isolate_must_be_a_bool_or_none():
-    with pytest.raises(TypeError, match="isolate must be True, False or None"):
-        api.isolating(False, "yes")

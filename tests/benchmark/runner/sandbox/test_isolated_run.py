@@ -1,7 +1,8 @@
 """The probe of a reader that walks the runner's stack to the scenes' plate texts: in the runner's process
 it reads every plate of the ideal lens (the genie's ceiling allows that there, so the ceiling guard cannot
-tell it from a strong reader); isolated (``--isolate``, and every sealed run) it finds nothing to read,
-while its rows, chains and the restorer beside it are scored as usual."""
+tell it from a strong reader); isolated (the default) it finds nothing to read,
+while its rows, chains and the restorer beside it are scored as usual. Isolation is the default; the
+runner's process is asked for with ``isolate=False`` (``--no-isolate``)."""
 
 from __future__ import annotations
 
@@ -59,12 +60,12 @@ def _rows(results):
 def test_in_the_runners_process_the_peeker_reads_every_plate_of_the_ideal_lens(runs):
     rows = _rows(runs[False])
     assert rows[("reader", "stack-peeker")].metrics["plate_acc"] == 1.0
-    assert "isolated" not in runs[False].meta
+    assert "isolated" not in runs[False].meta  # nothing ran isolated
 
 
 def test_isolated_it_reads_nothing_and_every_row_is_scored_as_usual(runs):
     rows, plain = _rows(runs[True]), _rows(runs[False])
-    assert runs[True].meta["isolated"] is True
+    assert runs[True].meta["isolated"] == ["keep", "stack-peeker"]
     assert set(rows) == set(plain)
     for key in (("reader", "stack-peeker"), ("chain", "keep>stack-peeker")):
         assert rows[key].ok and rows[key].metrics["plate_acc"] == 0.0
