@@ -253,7 +253,8 @@ def _aligned(rows: Sequence[Row]) -> tuple[list[str], list[list[int]]]:
     names = [u.names() for u in units]
     common = set(names[0]).intersection(*names[1:])
     order = [n for n in names[0] if n in common]
-    return order, [[{k: i for i, k in enumerate(n)}[name] for name in order] for n in names]
+    positions = [{k: i for i, k in enumerate(n)} for n in names]  # one index per row (was one per plate: O(n^2))
+    return order, [[where[name] for name in order] for where in positions]
 
 
 def seed_plates(rows: Iterable[Row], seed: int, attacks: set[str] | None = None,
