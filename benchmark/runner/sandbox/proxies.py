@@ -70,8 +70,8 @@ class _Remote:
     def read_batches(self, batches: Iterable[tuple[Tensor, attacks.ReadHints | None]]
                      ) -> list[list[list[attacks.PlateRead]]]:
         payload, callbacks = [], {}
-        for images, hints in batches:
-            sent, more = _hints(hints)
+        for i, (images, hints) in enumerate(batches):
+            sent, more = _hints(hints, f"segment#{i}")  # each batch calls back its own segmenter
             payload.append((images, sent))
             callbacks.update(more)
         answer, _ = self.process.call("read_batches", payload, callbacks)
@@ -158,11 +158,12 @@ def _context(ctx: attacks.FitContext) -> tuple[attacks.FitContext, dict[str, Any
     return sent, callbacks
 
 
-def _hints(hints: attacks.ReadHints | None) -> tuple[attacks.ReadHints | None, dict[str, Any]]:
+def _hints(hints: attacks.ReadHints | None, target: str = "segment") -> tuple[attacks.ReadHints | None, dict[str, Any]]:
+    """The hints an isolated reader is sent (its segmenter as a call back named `target`)."""
     if hints is None or hints.segment is None:
         return hints, {}
-    ref: Any = RemoteRef("segment")
-    return dataclasses.replace(hints, segment=ref), {"segment": hints.segment}
+    ref: Any = RemoteRef(target)
+    return dataclasses.replace(hints, segment=ref), {target: hints.segment}
 
 
 def _fit_report(report: Any) -> attacks.FitReport:

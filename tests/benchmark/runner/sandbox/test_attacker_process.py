@@ -113,8 +113,11 @@ def test_a_reader_calls_back_for_its_segmenter_and_its_reads_come_back_checked(p
         segment = lambda x: torch.ones(x.shape[0], x.shape[2], x.shape[3], dtype=torch.long)  # noqa: E731
         reads = reader.read(images, attacks.ReadHints(segment=segment))
         assert reads == [[attacks.PlateRead("L36", (0.0, 0.0, 4.0, 2.0), 0.5)]] * 2
-        batches = reader.read_batches([(images[:1], attacks.ReadHints(segment=segment))])
-        assert batches == [[[attacks.PlateRead("L36", (0.0, 0.0, 4.0, 2.0), 0.5)]]]
+        twice = lambda x: 2 * segment(x)  # noqa: E731
+        batches = reader.read_batches([(images[:1], attacks.ReadHints(segment=segment)),
+                                       (images[1:], attacks.ReadHints(segment=twice))])
+        assert batches == [[[attacks.PlateRead("L36", (0.0, 0.0, 4.0, 2.0), 0.5)]],
+                           [[attacks.PlateRead("L72", (0.0, 0.0, 4.0, 2.0), 0.5)]]]  # each batch its own segmenter
         with pytest.raises(PluginError) as caught:
             reader.read(images, attacks.ReadHints())  # no segmenter handed over: as in the runner's process
         assert type(caught.value).__name__ == "TypeError" and "not callable" in str(caught.value)
