@@ -428,7 +428,7 @@ def write_run_outputs(out: Path, results: Results) -> None:
     output = results.output
     assert output is not None, "only a run's own results carry its pictures and plate records"
     for picture in output.pictures:
-        copy_picture(picture, out / picture.name)
+        copy_picture(picture, out / picture.name, output.picture_key)
     if output.plates:
         report.write_plate_records(out, output.plates)
     write_run_charts(out, results.rows, output.plates, output.bound_curves)

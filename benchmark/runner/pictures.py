@@ -13,6 +13,7 @@ import lenses
 from benchmark.results.charts.plate_gallery import write_plate_gallery
 from benchmark.runner.evaluation import Attacked, Target, gallery_windows
 from benchmark.results.plate_scoring import readable
+from benchmark.store import cipher
 from benchmark.store.cache import atomic_write_bytes, config_hash, read_verified
 from benchmark.results.charts.samples import write_sample_grid
 from benchmark.results.schema import chain_name
@@ -85,11 +86,16 @@ def training_curves(lens: lenses.Lens, seed: int, cache_dir: Path, folder: Path)
     return name
 
 
-def copy_picture(source: Path, dest: Path) -> None:
+def copy_picture(source: Path, dest: Path, key: bytes | None = None) -> None:
     """Copy a task's picture (sealed when its task wrote it) to `dest` atomically, after checking it
-    against its checksum: a truncated file is never copied, and a full disk leaves no partial one."""
+    against its checksum: a truncated file is never copied, and a full disk leaves no partial one. A
+    sealed run's scene pictures are stored encrypted: `key` (``cipher.run_key``) decrypts them."""
     data = read_verified(source)
     if data is None:
         raise RuntimeError(f"picture {source} is missing or does not match its checksum (removed); run again "
                            "to rebuild its task")
+    if data.startswith(cipher.MAGIC):
+        if key is None:
+            raise RuntimeError(f"picture {source} is a sealed run's, encrypted; re-run with its --scene-seeds")
+        data = cipher.decrypt(key, source.name, data)
     atomic_write_bytes(dest, data)

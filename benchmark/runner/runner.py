@@ -21,6 +21,7 @@ import attacks
 from benchmark.runner import executors, sandbox
 from benchmark.runner.planning import AttackerRef, Task, plan, run_directory
 from benchmark.runner.tasks import TaskResult
+from benchmark.store import cipher
 from benchmark.store.provenance import provenance
 from benchmark.runner.config import RunConfig
 from benchmark.runner.defaults import STANDARD_ENSEMBLE, chain_parts
@@ -39,6 +40,7 @@ class RunOutput:
     lens_info: dict[str, dict]           # per lens: learned coefficients and spec
     bound_curves: dict[str, tuple]       # per lens: (plate widths px, Fano ceiling) of the first seed
     failed: list[Row] = field(default_factory=list)  # the rows with status "failed"
+    picture_key: bytes | None = None     # a sealed run's: its scene tasks' pictures are encrypted under it
 
 
 @dataclass(frozen=True)
@@ -129,7 +131,9 @@ def run(cfg: RunConfig, executor: str = "local", selection: Selection | None = N
 
     listening = partial is not None or on_task is not None
     results = executors.get(executor).run(planned, cfg, directory, on_result if listening else None)
-    return collect(planned, results, directory, failures)
+    output = collect(planned, results, directory, failures)
+    output.picture_key = cipher.run_key(cfg.scene_seeds)
+    return output
 
 
 def collect(planned: list[Task], results: dict[str, TaskResult], directory: Path,

@@ -9,6 +9,7 @@ corrupt result is reported with its path and recomputed.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -29,6 +30,8 @@ from benchmark.runner.diagnostics import profiling
 from benchmark.runner import task_costs
 from benchmark.runner.attacker_objects import load as load_attacker
 from benchmark.runner.budget import BudgetExceeded, time_budget
+from benchmark.results.charts import encrypted_pictures
+from benchmark.store import cipher
 from benchmark.store.cache import (CHECKSUM_SUFFIX, ArtifactCache, discard, exclusive, read_verified, seal,
                                    write_verified)
 from benchmark.codesign.trainer import TRAINER_VERSION
@@ -59,6 +62,8 @@ BOUND_CURVE_WIDTHS_PX = (4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192)
 # The plate set fills every width bin below this to its full quota (>= 50 plates per bin from 8 to 64 px).
 QUOTA_BELOW_PX = 64
 RESULT_FILE = "result.json"
+# The tasks that hold the val scenes' plates: a sealed run encrypts their pictures (cipher).
+SCENE_TASKS = ("sharp", "evaluate")
 
 
 @dataclass
@@ -85,15 +90,16 @@ class TaskResult:
         return cls([Row.from_json(r) for r in d["rows"]], d["settings"], d["plates"], d["meta"])
 
 
-def load_result(directory: Path, task: Task) -> TaskResult | None:
-    """The task's stored result, or None when absent or corrupt (reported with its path, removed)."""
+def load_result(directory: Path, task: Task, key: bytes | None = None) -> TaskResult | None:
+    """The task's stored result, or None when absent or corrupt (reported with its path, removed);
+    `key`: a sealed run's (``cipher.run_key``), which its results are encrypted under."""
     path = directory / task.key / RESULT_FILE
     data = read_verified(path)
     if data is None:
         return None
     try:
-        result = TaskResult.from_json(json.loads(data))
-    except (ValueError, KeyError, TypeError) as exc:  # verified bytes of an older layout
+        result = TaskResult.from_json(json.loads(_plain(data, key)))
+    except (ValueError, KeyError, TypeError) as exc:  # verified bytes of an older layout, or another key's
         log.warning("unreadable task result %s (%s); it will be recomputed", path, exc)
         discard(path)
         return None
@@ -104,6 +110,15 @@ def load_result(directory: Path, task: Task) -> TaskResult | None:
         discard(path)
         return None
     return result
+
+
+def _plain(data: bytes, key: bytes | None, label: str = RESULT_FILE) -> bytes:
+    """A stored file's bytes, decrypted when a sealed run encrypted them (CipherError without its key)."""
+    if not data.startswith(cipher.MAGIC):
+        return data
+    if key is None:
+        raise cipher.CipherError(f"{label} is encrypted (a sealed run's) and no key was given")
+    return cipher.decrypt(key, label, data)
 
 
 def is_cached(directory: Path, task: Task) -> bool:
@@ -144,12 +159,13 @@ def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
     lens's task that raises gives failed rows (`failed_result`) instead of ending the run, so the
     other lenses' results are complete.
     """
-    done = load_result(directory, task)
+    key = cipher.run_key(cfg.scene_seeds)
+    done = load_result(directory, task, key)
     if done is not None and not done.has_failures:
         return done
     directory.mkdir(parents=True, exist_ok=True)
     with exclusive(directory / f".{task.key}.lock"):
-        done = load_result(directory, task)  # another run finished it while this one waited
+        done = load_result(directory, task, key)  # another run finished it while this one waited
         if done is not None and not done.has_failures:
             return done
         for stale in directory.glob(f".{task.key}.staging-*"):  # left by a run that died mid-task
@@ -158,7 +174,9 @@ def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
         staging.mkdir(parents=True)
         t0 = time.perf_counter()
         try:
-            with profiling.task_scope(task):  # a no-op unless the run is profiled (--profile-time)
+            # A sealed run's tasks that see the val scenes write their pictures encrypted (cipher).
+            encrypt = None if key is None or task.kind not in SCENE_TASKS else functools.partial(cipher.encrypt, key)
+            with profiling.task_scope(task), encrypted_pictures(encrypt):  # profiling: a no-op unless --profile-time
                 result = _KINDS[task.kind](task, cfg, staging)
         except Exception as exc:
             shutil.rmtree(staging)
@@ -176,12 +194,13 @@ def execute(task: Task, cfg: RunConfig, directory: Path) -> TaskResult:
         for row in result.rows:
             row.provenance["wall_s"] = wall_s
         task_costs.record(staging, task, cfg, wall_s)  # what a dry run's estimates are made of
-        write_verified(staging / RESULT_FILE, json.dumps(result.to_json(), default=str, allow_nan=False).encode())
+        data = json.dumps(result.to_json(), default=str, allow_nan=False).encode()
+        write_verified(staging / RESULT_FILE, data if key is None else cipher.encrypt(key, RESULT_FILE, data))
         final = directory / task.key
         if final.exists():  # a corrupt result, or one with failures
             shutil.rmtree(final)
         os.replace(staging, final)
-    loaded = load_result(directory, task)
+    loaded = load_result(directory, task, key)
     if loaded is None:
         raise RuntimeError(f"task {task.key}: its result {directory / task.key / RESULT_FILE} vanished after writing")
     return loaded
@@ -438,7 +457,7 @@ def _evaluate(task: Task, cfg: RunConfig, staging: Path) -> TaskResult:
     builder = _builder(cfg, task.lens, task.seed, lens)
     restorers, failed_restorers = _load_attackers(task.restorers, attacks.Restorer, builder)
     readers, failed_readers = _load_attackers(task.readers, attacks.Reader, builder)
-    fitted = {ref.name: _fit_meta(staging.parent, task, ref) for ref in task.restorers}
+    fitted = {ref.name: _fit_meta(staging.parent, task, ref, cipher.run_key(cfg.scene_seeds)) for ref in task.restorers}
     out = Attacked(rows=failed_restorers + failed_readers)
     ready = fit_readers(target, readers, cfg)
     read_sensor(target, ready, cfg, builder, out)
@@ -454,10 +473,10 @@ def _evaluate(task: Task, cfg: RunConfig, staging: Path) -> TaskResult:
     return TaskResult(out.rows, builder.settings, out.plates, meta={"pictures": pictures})
 
 
-def _fit_meta(directory: Path, task: Task, ref: AttackerRef) -> dict:
+def _fit_meta(directory: Path, task: Task, ref: AttackerRef, key: bytes | None) -> dict:
     """The meta of the restorer's fit task; {} when another run is just redoing it (the evaluate
     task then fits the restorer itself)."""
-    done = load_result(directory, fit_task(task.seed, task.lens, ref, lens_tag=task.lens_tag))
+    done = load_result(directory, fit_task(task.seed, task.lens, ref, lens_tag=task.lens_tag), key)
     return {} if done is None else done.meta
 
 

@@ -5,12 +5,16 @@ Charts are built on matplotlib's object API (``matplotlib.figure.Figure``), neve
 no global backend to select before an import, no figure registry to leak, and ``savefig`` renders
 with the Agg canvas whatever backend the caller's session (a notebook, a GUI) has chosen. Each
 chart module offers a ``*_figure`` function that returns the figure (for tests and notebooks) and a
-``write_*`` function that saves it.
+``write_*`` function that saves it. Inside ``encrypted_pictures`` (a sealed run's tasks), what
+``save_figure`` writes is encrypted before it reaches the disk (``benchmark.store.cipher``).
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import io
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +24,20 @@ from benchmark.store.cache import atomic_write_bytes
 
 # No matplotlib version stamp in the PNGs: the same data render to byte-identical files.
 PNG_METADATA: dict[str, Any] = {"Software": None}
+
+
+# (file name, PNG bytes) -> the bytes to write: a sealed run's encryption, None elsewhere.
+_ENCRYPT: contextvars.ContextVar[Callable[[str, bytes], bytes] | None] = contextvars.ContextVar("encrypt", default=None)
+
+
+@contextlib.contextmanager
+def encrypted_pictures(encrypt: Callable[[str, bytes], bytes] | None) -> Iterator[None]:
+    """Within it, ``save_figure`` writes ``encrypt(file name, bytes)`` instead of the bytes (None: as they are)."""
+    token = _ENCRYPT.set(encrypt)
+    try:
+        yield
+    finally:
+        _ENCRYPT.reset(token)
 
 
 def new_figure(**kwargs: Any) -> Figure:
@@ -43,5 +61,6 @@ def save_figure(fig: Figure, path: Path | str, dpi: int = 100, metadata: dict | 
     buffer = io.BytesIO()
     fig.savefig(buffer, format=path.suffix.lstrip(".") or "png", dpi=dpi,
                 metadata={**PNG_METADATA, **(metadata or {})})
-    atomic_write_bytes(path, buffer.getvalue())
+    encrypt = _ENCRYPT.get()
+    atomic_write_bytes(path, buffer.getvalue() if encrypt is None else encrypt(path.name, buffer.getvalue()))
     return path

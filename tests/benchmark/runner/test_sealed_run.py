@@ -93,6 +93,14 @@ def test_a_reader_that_rebuilds_the_scenes_reads_them_all_unless_the_run_is_seal
     sealed, meta = _smoke(tmp_path, plugin, "--scene-seeds", f"0={SEALED_SEED}")
     assert sealed["n_plates"] == plain["n_plates"] == 2 and sealed["plate_acc"] < 0.05
     assert meta["scene_seeds"] == {"0": SEALED_SEED}
+    # Nor can it read them from the cache, where the finished tasks of the run wait: the sealed scenes'
+    # plate texts appear in no file of it (results and scene pictures are encrypted), only in the outputs.
+    truths = {line.split(",")[4] for line in (tmp_path / "sealed" / "plates.csv").read_text().splitlines()[1:]}
+    assert len(truths) >= 2
+    leaked = [p for p in (tmp_path / "cache").rglob("*") if p.is_file() and any(t.encode() in p.read_bytes()
+                                                                                for t in truths)]
+    assert not leaked
+    assert all(p.read_bytes().startswith(b"\x89PNG") for p in (tmp_path / "sealed").glob("*.png"))
 
 
 def test_a_sealed_run_draws_a_fresh_seed_of_the_sealed_range_for_every_run_seed():
@@ -101,3 +109,16 @@ def test_a_sealed_run_draws_a_fresh_seed_of_the_sealed_range_for_every_run_seed(
     assert all(0 <= v < 2**api.SCENE_SEED_BITS for d in draws for v in d.values())
     assert len({v for d in draws for v in d.values()}) == 9  # fresh each time, distinct across run seeds
     assert api._scene_seeds([0, 1], False, None) == {}
+
+
+def test_a_sealed_runs_picture_is_copied_decrypted_and_refused_without_its_key(tmp_path):
+    from benchmark.runner.pictures import copy_picture
+    from benchmark.store import cipher
+    from benchmark.store.cache import write_verified
+    png, key = b"\x89PNG\r\n\x1a\n" + bytes(range(256)), cipher.run_key({0: SEALED_SEED})
+    source = write_verified(tmp_path / "task" / "samples_ideal_seed0.png", cipher.encrypt(key, "samples_ideal_seed0.png", png))
+    copy_picture(source, tmp_path / "out.png", key)
+    assert (tmp_path / "out.png").read_bytes() == png
+    with pytest.raises(RuntimeError, match="a sealed run's, encrypted"):
+        copy_picture(source, tmp_path / "out2.png")
+    assert not (tmp_path / "out2.png").exists()
