@@ -66,7 +66,8 @@ def test_grid_survives_a_killed_worker(tmp_path):
             def restore(self, sensor):
                 return sensor.clamp(0, 1)
     '''))
-    extra = ("--attack", f"{plugin}:Crashy")
+    # In the worker's own process: isolated (the default), its exit would end only its attacker process.
+    extra = ("--attack", f"{plugin}:Crashy", "--no-isolate")
     local = run(tmp_path / "local", tmp_path / "cache-local", "local", lenses=("defocus",), seeds="0", extra=extra)
     marker = tmp_path / "marker"
     on_ray = run(tmp_path / "ray", tmp_path / "cache-ray", "ray", lenses=("defocus",), seeds="0", extra=extra,
