@@ -204,7 +204,7 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
             run seeds themselves (or random ones with `sealed`).
         isolate: Run each attacker not shipped with the suite (a file spec, another distribution's entry
             point) in a process of its own, handed only what its threat model grants: its code cannot
-            reach the runner's scenes, plate texts or scoring (``benchmark.runner.sandbox``; about 2 s
+            reach the runner's scenes, plate texts or scoring (``benchmark.runner.sandbox``; about 1.3 s
             to start per attacker and task). False: in this process (your own plugin, under
             development; a sealed run refuses it). Objects passed as attackers stay in this process.
 
