@@ -12,6 +12,7 @@ score), `rows` (rows through the schema), and this module (orchestration).
 
 from __future__ import annotations
 
+import hashlib
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -73,9 +74,23 @@ def select_attackers(requested: list[str] | None, isolate: bool = False) -> Sele
             a.close()  # type: ignore[attr-defined]
     specs = [sandbox.ISOLATED + spec if sandbox.is_stand_in(a) else spec for a, spec in zip(selected, specs)]
     chosen = [(a, spec) for a, spec in zip(selected, specs) if requested is not None or a.run_by_default]
-    return Selection([AttackerRef(a.name, spec) for a, spec in chosen if isinstance(a, attacks.Restorer)],
-                     [AttackerRef(a.name, spec) for a, spec in chosen if isinstance(a, attacks.Reader)],
+    return Selection([AttackerRef(a.name, spec, file_key(spec)) for a, spec in chosen if isinstance(a, attacks.Restorer)],
+                     [AttackerRef(a.name, spec, file_key(spec)) for a, spec in chosen if isinstance(a, attacks.Reader)],
                      failures)
+
+
+def file_key(spec: str) -> str:
+    """For a file plugin ('path/file.py:Class', isolated or not), a hash of the file's text, which keys the
+    run's cache with its name: an edited plugin is computed again, not served the results of its old text
+    (the modules it imports are not hashed). "" for a registered name."""
+    spec = spec.removeprefix(sandbox.ISOLATED)
+    if ".py:" not in spec:
+        return ""
+    path = Path(spec.rpartition(":")[0]).expanduser()
+    try:
+        return "file-" + hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+    except OSError:  # it loaded a moment ago; gone now: its tasks fail to load it and say so
+        return ""
 
 
 def standard_attackers() -> list[str]:
