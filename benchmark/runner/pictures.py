@@ -94,8 +94,8 @@ def copy_picture(source: Path, dest: Path, key: bytes | None = None) -> None:
     if data is None:
         raise RuntimeError(f"picture {source} is missing or does not match its checksum (removed); run again "
                            "to rebuild its task")
-    if data.startswith(cipher.MAGIC):
-        if key is None:
-            raise RuntimeError(f"picture {source} is a sealed run's, encrypted; re-run with its --scene-seeds")
-        data = cipher.decrypt(key, source.name, data)
+    try:
+        data = cipher.plain(key, source.name, data)
+    except cipher.CipherError:
+        raise RuntimeError(f"picture {source} is a sealed run's, encrypted; re-run with its --scene-seeds") from None
     atomic_write_bytes(dest, data)

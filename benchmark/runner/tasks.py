@@ -98,7 +98,7 @@ def load_result(directory: Path, task: Task, key: bytes | None = None) -> TaskRe
     if data is None:
         return None
     try:
-        result = TaskResult.from_json(json.loads(_plain(data, key)))
+        result = TaskResult.from_json(json.loads(cipher.plain(key, RESULT_FILE, data)))
     except (ValueError, KeyError, TypeError) as exc:  # verified bytes of an older layout, or another key's
         log.warning("unreadable task result %s (%s); it will be recomputed", path, exc)
         discard(path)
@@ -110,15 +110,6 @@ def load_result(directory: Path, task: Task, key: bytes | None = None) -> TaskRe
         discard(path)
         return None
     return result
-
-
-def _plain(data: bytes, key: bytes | None, label: str = RESULT_FILE) -> bytes:
-    """A stored file's bytes, decrypted when a sealed run encrypted them (CipherError without its key)."""
-    if not data.startswith(cipher.MAGIC):
-        return data
-    if key is None:
-        raise cipher.CipherError(f"{label} is encrypted (a sealed run's) and no key was given")
-    return cipher.decrypt(key, label, data)
 
 
 def is_cached(directory: Path, task: Task) -> bool:

@@ -48,3 +48,13 @@ def decrypt(key: bytes, label: str, blob: bytes) -> bytes:
         raise CipherError(f"{label}: not an encrypted file of a sealed run")
     nonce = blob[len(MAGIC):len(MAGIC) + _NONCE_BYTES]
     return _xor(blob[len(MAGIC) + _NONCE_BYTES:], key, nonce, label)
+
+
+def plain(key: bytes | None, label: str, data: bytes) -> bytes:
+    """A stored file's bytes as written: decrypted when a sealed run encrypted them (CipherError without
+    its key), as they are otherwise."""
+    if not data.startswith(MAGIC):
+        return data
+    if key is None:
+        raise CipherError(f"{label} is encrypted (a sealed run's) and no key was given")
+    return decrypt(key, label, data)

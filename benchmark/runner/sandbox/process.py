@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import contextlib
 import itertools
-import logging
 import os
 import re
 import signal
@@ -22,8 +21,6 @@ from typing import Any
 import torch
 
 from benchmark.runner.sandbox.wire import ProcessEnded, WireError, receive_safe, send_trusted
-
-log = logging.getLogger(__name__)
 
 _LIVE: set[int] = set()
 
