@@ -8,6 +8,13 @@ the network), and the batch split over width bands as the per-lens fits do (``tr
 Every draw (lens, plates, noise, dropout) is a function of (seed, step), so a run resumed from its checkpoint
 continues exactly.
 
+What the reader reads (``reads``): "sensor", the sensor image, its crop holding the blur's spread (the
+start of ``learned-reader``'s per-lens fits); or "wiener", the per-colour Wiener estimate of the sensor
+patch made with the drawn lens's PSF and gain at the noise measured on the patch (``psf_inputs``, as
+``learned-reader-psf`` reads a run's images), cut around the box with no blur margin. With "wiener" the
+PSF reaches the network through the one linear inverse that knows it, and the network learns to read
+what Wiener leaves: amplified noise, ringing, the frequencies the lens erased.
+
 Held out: ``heldout_lenses`` lenses drawn from the same family with another seed stream (not drawn in
 training), ``eval_plates`` plates each per width bin of ``EVAL_WIDTHS_PX`` (true boxes); the score is
 the mean exact-plate accuracy over lenses and bins. Evaluated at the start and every ``eval_every``
@@ -38,9 +45,13 @@ from attacks.readers.plates.plate_sim import PlateBatch, psf_radius_px
 from attacks.training.lens_family import FamilyLens, LensFamily
 from attacks.training.plate_reader_training import (
     FitCurve, ReaderBudget, flattened, held_out_gain, held_out_set, optimiser, plate_accuracy, slot_loss, training_batch)
-from attacks.training.psf_restorer_training import stream_generator
+from attacks.backends.real_fft import OtfCache
+from attacks.training.psf_restorer_training import psf_inputs, stream_generator
 
-__all__ = ["FAMILY_BUDGET", "FamilyCamera", "family_camera", "family_held_out", "pretrain_family"]
+__all__ = ["FAMILY_BUDGET", "READS", "FamilyCamera", "family_camera", "family_held_out", "pretrain_family"]
+
+READS = ("sensor", "wiener")
+"""What the reader reads (module docs)."""
 
 log = logging.getLogger(__name__)
 
@@ -75,24 +86,30 @@ class FamilyCamera:
     psf_half_px: int
 
 
-def family_camera(family: LensFamily, drawn: FamilyLens) -> FamilyCamera:
-    """The camera of a drawn lens (CPU; the mask lens is shared, so use it before the next draw)."""
+def family_camera(family: LensFamily, drawn: FamilyLens, reads: str = "sensor") -> FamilyCamera:
+    """The camera of a drawn lens (CPU; the mask lens is shared, so use it before the next draw): the
+    sensor image, or with ``reads="wiener"`` its Wiener estimate (module docs; crops then hold no margin)."""
+    if reads not in READS:
+        raise ValueError(f"reads={reads!r}: must be one of {', '.join(READS)}")
     lens = family.build(drawn)
     with torch.no_grad():
         psf = lens.psf().detach().cpu()
+        gain = lens.gain().detach().cpu()
+    otf = OtfCache(psf) if reads == "wiener" else None
 
     def camera(x: Tensor, generator: torch.Generator) -> Tensor:
         with torch.no_grad():
-            return lens(x, generator=generator)
-    return FamilyCamera(drawn, camera, psf_radius_px(psf), psf.shape[-1] // 2)
+            sensor = lens(x, generator=generator)
+            return sensor if otf is None else psf_inputs(sensor, otf, gain)[:, :3]
+    return FamilyCamera(drawn, camera, psf_radius_px(psf) if otf is None else 0.0, psf.shape[-1] // 2)
 
 
-def family_held_out(family: LensFamily, budget: FamilyBudget, fmt: str, seed: int
+def family_held_out(family: LensFamily, budget: FamilyBudget, fmt: str, seed: int, reads: str = "sensor"
                     ) -> list[tuple[FamilyLens, dict[int, PlateBatch]]]:
     """The fixed held-out sets: per held-out lens (another seed stream), its plates per width bin."""
     out = []
     for i in range(budget.heldout_lenses):
-        through = family_camera(family, family.draw(stream_generator(seed, HELDOUT_SEED_OFFSET, i)))
+        through = family_camera(family, family.draw(stream_generator(seed, HELDOUT_SEED_OFFSET, i)), reads)
         out.append((through.drawn, held_out_set(through.camera, budget.steps, through.spread_px, through.psf_half_px,
                                                 fmt, seed + 101 * (i + 1))))
     return out
@@ -106,7 +123,8 @@ def _evaluate(net: nn.Module, held_out: list[tuple[FamilyLens, dict[int, PlateBa
 
 def pretrain_family(net: PlateCNN, fmt: str, seed: int, budget: FamilyBudget = FAMILY_BUDGET,
                     checkpoint: Path | None = None, family: LensFamily | None = None,
-                    progress: Callable[[str], None] | None = None) -> tuple[FitCurve, list[dict[str, Any]]]:
+                    progress: Callable[[str], None] | None = None, reads: str = "sensor"
+                    ) -> tuple[FitCurve, list[dict[str, Any]]]:
     """Train ``net`` (the sharp start, in place) across the lens family (module docs).
 
     Args:
@@ -118,19 +136,20 @@ def pretrain_family(net: PlateCNN, fmt: str, seed: int, budget: FamilyBudget = F
             and plain values, read back with ``weights_only=True``); None keeps nothing.
         family: The lens family (default ``LensFamily()``).
         progress: Called with one line per evaluation (besides the log).
+        reads: "sensor" or "wiener": what the reader reads (module docs).
 
     Returns:
         The held-out curve (mean over the held-out lenses per bin) and the held-out lenses' descriptions.
     """
     with torch.random.fork_rng(devices=[]):  # the global generator (dropout) is seeded per step, then restored
-        return _pretrain(net, fmt, seed, budget, checkpoint, family or LensFamily(), progress)
+        return _pretrain(net, fmt, seed, budget, checkpoint, family or LensFamily(), progress, reads)
 
 
 def _pretrain(net: PlateCNN, fmt: str, seed: int, budget: FamilyBudget, checkpoint: Path | None, family: LensFamily,
-              progress: Callable[[str], None] | None) -> tuple[FitCurve, list[dict[str, Any]]]:
+              progress: Callable[[str], None] | None, reads: str) -> tuple[FitCurve, list[dict[str, Any]]]:
     steps = budget.steps
     optimizer, schedule, criterion = optimiser(net, steps)
-    held_out = family_held_out(family, budget, fmt, seed)
+    held_out = family_held_out(family, budget, fmt, seed, reads)
     described = [d.describe() for d, _ in held_out]
     curve, best, start = FitCurve([], [], [], "budget", False, 0.0), None, 0
     if checkpoint is not None and checkpoint.exists():
@@ -177,7 +196,7 @@ def _pretrain(net: PlateCNN, fmt: str, seed: int, budget: FamilyBudget, checkpoi
             break
         g = stream_generator(seed, step)
         torch.manual_seed(int(torch.randint(0, 2**62, (1,), generator=stream_generator(seed, step, 2))))  # dropout's draws
-        through = family_camera(family, family.draw(g))
+        through = family_camera(family, family.draw(g), reads)
         rng = np.random.default_rng([seed, step, 1])
         crops, labels = training_batch(through.camera, steps, rng, g, through.spread_px, fmt, through.psf_half_px)
         loss = slot_loss(net(crops), labels, criterion)

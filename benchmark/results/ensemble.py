@@ -36,7 +36,8 @@ from benchmark.results.plate_scoring import LEGACY_READABLE_MIN_WIDTH_PX, READAB
 from benchmark.results.schema import Row, Units
 
 __all__ = ["Accuracy", "Contribution", "PlateEnsemble", "SceneEnsemble", "SeedPlates", "WidthBin", "WIDTH_VALUE",
-           "chain_accuracy", "plate_ensemble", "pooled_min_width", "scene_ensemble", "seed_plates", "seed_scenes",
+           "chain_accuracy", "plate_ensemble", "pooled_min_width", "scene_ensemble", "seed_plates", "seed_scene_names",
+           "seed_scenes",
            "strongest_chain"]
 
 # Kinds of row whose outcomes join the ensemble (``reference`` rows are not attackers).
@@ -362,6 +363,12 @@ def seed_scenes(rows: Iterable[Row], seed: int, metric: str = "psnr_db", attacks
     values = np.stack([np.asarray(r.units.values[metric], dtype=float)[idx]  # type: ignore[union-attr]
                        for r, idx in zip(found, index)], axis=1)
     return tuple(r.attack for r in found), values
+
+
+def seed_scene_names(rows: Iterable[Row], seed: int, metric: str = "psnr_db") -> list[str]:
+    """The scene names ``seed_scenes`` orders its values by (empty where no restorer of `seed` has units)."""
+    found = _units_rows(rows, RESTORER_KINDS, "scene", metric, None).get(seed)
+    return _aligned(found)[0] if found else []
 
 
 def scene_ensemble(rows: Iterable[Row], metric: str = "psnr_db", attacks: set[str] | None = None,

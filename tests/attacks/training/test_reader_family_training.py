@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import pytest
 import torch
 
 from attacks.readers.learned_reader import LearnedReader
@@ -93,3 +94,42 @@ def test_a_fine_tune_that_cannot_beat_its_start_keeps_it():
     assert curve.steps == [0, 2, 4] and curve.accuracy[0] > 0.8 > max(curve.accuracy[1:])
     assert curve.best_step == 0 and all(torch.equal(start[k], v) for k, v in net.state_dict().items())
     assert "eval_start" in budget.to_dict() and "eval_start" not in dataclasses.replace(budget, eval_start=False).to_dict()
+
+
+def test_the_wiener_camera_brings_a_drawn_lens_s_image_closer_to_the_scene_and_cuts_no_blur_margin():
+    """reads="wiener": the patch the reader is trained on is the Wiener estimate with the drawn lens's PSF and
+    gain, nearer the sharp scene than the sensor image is (the blurring lens of the family's first draw), and
+    its crops hold no blur margin; "sensor" keeps the spread."""
+    from attacks.training.reader_family_training import family_camera
+
+    family = LensFamily()
+    drawn = family.draw(stream_generator(0, 3))
+    sensor, wiener = family_camera(family, drawn, "sensor"), family_camera(family, drawn, "wiener")
+    assert wiener.spread_px == 0.0 < sensor.spread_px and wiener.psf_half_px == sensor.psf_half_px
+    g = torch.Generator().manual_seed(0)
+    scene = torch.zeros(1, 3, 96, 96)
+    scene[..., 24:72, ::8] = 0.9  # bars: detail the lens blurs
+    scene[..., 24:72, 1::8] = 0.9
+    scene += 0.05
+    seen, estimate = sensor.camera(scene, torch.Generator().manual_seed(1)), wiener.camera(scene, g)
+    gain = family.build(drawn).gain().detach().view(1, 3, 1, 1)
+    inner = (..., slice(16, 80), slice(16, 80))
+    error_sensor = ((seen / gain).clamp(0, 1) - scene)[inner].pow(2).mean()
+    error_wiener = (estimate - scene)[inner].pow(2).mean()
+    assert error_wiener < 0.7 * error_sensor, (float(error_wiener), float(error_sensor))
+
+
+def test_an_unknown_input_is_refused_with_the_valid_ones():
+    from attacks.training.reader_family_training import family_camera
+
+    family = LensFamily()
+    with pytest.raises(ValueError, match="sensor, wiener"):
+        family_camera(family, family.draw(stream_generator(0, 0)), "restored")
+
+
+def test_a_wiener_pretraining_is_a_function_of_its_seed(tmp_path):
+    a, b = fresh(), fresh()
+    curve_a, _ = pretrain_family(a, FMT, 0, TINY, reads="wiener")
+    curve_b, _ = pretrain_family(b, FMT, 0, TINY, reads="wiener")
+    assert curve_a.accuracy == curve_b.accuracy
+    assert all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values()))

@@ -1,0 +1,152 @@
+"""A fresh run's attackers against the published entry's, paired per plate and per scene:
+``python -m benchmark.studies.run_pairing_study --run runs/<dir> [--lens gp ...]``.
+
+For each lens of the run that has a published quick entry, at one seed (default 0): the run's rows and the
+entry's rows of that seed, each reduced to its ensemble (``benchmark.results.ensemble``: a plate read by any
+reader chain; a scene at its best restorer). The run must have made the same plates and scenes (the ids
+agree, which proves the pairing; a mismatch is reported, not paired).
+
+- Plates: per width bin (``WIDTH_BINS_PX``) both ensembles' accuracies (Wilson 95 %), with the attack gap
+  of the run's ensemble against the ideal observer's ceiling (the tighter one where
+  ``leaderboard/studies/ideal_observer.json`` holds it); pooled from 32 px, the paired bootstrap
+  difference, and the plates each of the run's chains alone read among those the entry's ensemble missed.
+- Scenes: the ensemble PSNR of both, and the paired per-scene difference (bootstrap); the run's restorers'
+  mean PSNR on the same scenes.
+- Costs: each row's wall seconds as the run recorded them (fit and evaluation of that attacker), the run's
+  threads, and the load average when the study ran (the run's own load is not recorded).
+
+Writes ``leaderboard/studies/run_pairing.json`` (merged per lens).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmark.results import stats
+from benchmark.results.attack_gap import attack_gaps, gap_curves
+from benchmark.results.ensemble import plate_ensemble, seed_plates, seed_scene_names, seed_scenes
+from benchmark.results.entries import entry_name, read_entry
+from benchmark.results.schema import Results, Row
+from benchmark.store.provenance import git_commit
+
+__all__ = ["main", "pair_lens"]
+
+ROOT = Path(__file__).resolve().parents[2]
+LEADERBOARD = ROOT / "leaderboard"
+OUT = LEADERBOARD / "studies" / "run_pairing.json"
+FROM_PX = 32
+
+
+def _compare(a: np.ndarray, b: np.ndarray, direction: str = "greater") -> dict[str, Any]:
+    c = stats.paired_bootstrap(a.astype(float), b.astype(float))
+    return {"difference": round(c.difference, 4), "low": round(c.low, 4), "high": round(c.high, 4),
+            "p_value": c.p_value, "verdict": stats.verdict(c, direction).label, "n": c.n}
+
+
+def _plates(run_rows: list[Row], entry_rows: list[Row], seed: int, study: dict[str, Any] | None, lens: str,
+            spec: dict[str, Any] | None) -> dict[str, Any]:
+    ours, theirs = seed_plates(run_rows, seed, readable_only=False), seed_plates(entry_rows, seed, readable_only=False)
+    if ours is None or theirs is None:
+        return {"paired": False, "why": "no per-plate units in " + ("the run" if ours is None else "the entry")}
+    if set(ours.names) != set(theirs.names):
+        return {"paired": False, "why": "plate ids differ", "run": len(ours.names), "entry": len(theirs.names),
+                "common": len(set(ours.names) & set(theirs.names))}
+    order = [theirs.names.index(n) for n in ours.names]
+    entry_read = theirs.ensemble[order]
+    widths = ours.widths if ours.widths is not None else np.zeros(len(ours.names))
+    readable = widths >= FROM_PX
+    out: dict[str, Any] = {"paired": True, "n_plates": len(ours.names), f"n_from_{FROM_PX}px": int(readable.sum())}
+    out[f"from_{FROM_PX}px"] = {"run": round(float(ours.ensemble[readable].mean()), 4),
+                                "entry": round(float(entry_read[readable].mean()), 4),
+                                "run - entry": _compare(ours.ensemble[readable], entry_read[readable])}
+    missed = readable & ~entry_read
+    out["chains_on_plates_the_entry_missed"] = {
+        chain: int((ours.read[i] & missed).sum()) for i, chain in enumerate(ours.chains)}
+    out["entry_missed"] = int(missed.sum())
+    curve, fallback = gap_curves(study, lens, spec)
+    ensemble = plate_ensemble(run_rows)
+    gaps = {} if curve is None or ensemble is None else {
+        f"{g.low_px:g}": {"ceiling": round(g.ceiling, 4), "kind": g.ceiling_kind, "gap": round(g.gap, 4)}
+        for g in attack_gaps(ensemble, curve, fallback)}
+    bins = {}
+    edges = [8, 12, 16, 24, 32, 48, 64, 96, 128, 192, np.inf]
+    for low, high in zip(edges[:-1], edges[1:]):
+        inside = (widths >= low) & (widths < high)
+        if inside.any():
+            n = int(inside.sum())
+            run_hits, entry_hits = int(ours.ensemble[inside].sum()), int(entry_read[inside].sum())
+            bins[f"{low:g}"] = {"n": n, "run": round(run_hits / n, 4), "run_interval": stats.wilson_interval(run_hits, n),
+                                "entry": round(entry_hits / n, 4), **({"gap": gaps[f"{low:g}"]} if f"{low:g}" in gaps else {})}
+    out["bins"] = bins
+    return out
+
+
+def _scenes(run_rows: list[Row], entry_rows: list[Row], seed: int) -> dict[str, Any]:
+    ours, theirs = seed_scenes(run_rows, seed), seed_scenes(entry_rows, seed)
+    if ours is None or theirs is None:
+        return {"paired": False, "why": "no per-scene units"}
+    names_ours, names_theirs = seed_scene_names(run_rows, seed), seed_scene_names(entry_rows, seed)
+    if set(names_ours) != set(names_theirs):
+        return {"paired": False, "why": "scene ids differ"}
+    order = [names_theirs.index(n) for n in names_ours]
+    best_ours, best_theirs = ours[1].max(axis=1), theirs[1].max(axis=1)[order]
+    return {"paired": True, "n_scenes": len(names_ours), "run_db": round(float(best_ours.mean()), 3),
+            "entry_db": round(float(best_theirs.mean()), 3), "run - entry": _compare(best_ours, best_theirs),
+            "run_restorers_db": {r: round(float(v), 3) for r, v in zip(ours[0], ours[1].mean(axis=0))}}
+
+
+def pair_lens(run_rows: list[Row], lens: str, seed: int, study: dict[str, Any] | None) -> dict[str, Any]:
+    """The study's record of `lens` (module docs)."""
+    entry = read_entry(LEADERBOARD / "entries" / entry_name(lens, "quick", "synthetic"))
+    ours = [r for r in run_rows if r.lens == lens and r.seed == seed]
+    theirs = [r for r in entry.rows if r.seed == seed]
+    return {"plates": _plates(ours, theirs, seed, study, lens, entry.lens_spec),
+            "scenes": _scenes(ours, theirs, seed),
+            "wall_s": {r.attack: round(float(r.provenance.get("wall_s", 0.0)), 1) for r in ours
+                       if r.kind in ("restorer", "reader", "chain") and r.status == "ok"}}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--run", type=Path, required=True, help="a run's folder (its results.json)")
+    parser.add_argument("--lens", action="append", default=None, help="lens (repeatable; default: every lens of the run)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, default=OUT)
+    args = parser.parse_args(argv)
+    results = Results.from_json(json.loads((args.run / "results.json").read_text()))
+    study_path = LEADERBOARD / "studies" / "ideal_observer.json"
+    observer = json.loads(study_path.read_text()) if study_path.exists() else None
+    record: dict[str, Any] = json.loads(args.out.read_text()) if args.out.exists() else {}
+    record.update({"commit": git_commit(), "seed": args.seed, "load_average_at_study": [round(x, 2) for x in os.getloadavg()],
+                   "pooled_from_px": FROM_PX})
+    record.setdefault("lenses", {})
+    for lens in args.lens or sorted({r.lens for r in results.rows}):
+        if not (LEADERBOARD / "entries" / entry_name(lens, "quick", "synthetic")).exists():
+            print(f"{lens}: no published quick entry; skipped")
+            continue
+        pairing = pair_lens(results.rows, lens, args.seed, observer)
+        pairing["run"] = {"folder": str(args.run), "meta": {k: results.meta.get(k) for k in ("date", "git_commit",
+                                                                                            "code_version", "threads")}}
+        record["lenses"][lens] = pairing
+        p, s = pairing["plates"], pairing["scenes"]
+        line = f"{lens}: "
+        if p["paired"]:
+            c = p[f"from_{FROM_PX}px"]
+            line += f"plates from {FROM_PX} px {100 * c['entry']:.1f} -> {100 * c['run']:.1f} % ({c['run - entry']['verdict']})"
+        if s["paired"]:
+            line += f"; ensemble PSNR {s['entry_db']:.2f} -> {s['run_db']:.2f} dB ({s['run - entry']['verdict']})"
+        print(line)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(record, indent=1, default=float) + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
