@@ -211,9 +211,10 @@ def build_parser() -> argparse.ArgumentParser:
     pre.add_argument("--device", type=_device, default="cpu", help="cpu (default) or cuda[:N]")
     ship = sub.add_parser("pretrain-attacker", help="train (or load from the cache) a lens-independent attacker "
                                                     "and ship its weights in the package with their provenance")
-    ship.add_argument("attacker", choices=["nafnet-generic", "learned-reader", "nafnet-known-psf"],
+    ship.add_argument("attacker", choices=["nafnet-generic", "learned-reader", "nafnet-known-psf", "learned-reader-psf"],
                       help="the lens-independent attacker (learned-reader: its pre-training on sharp plates; "
-                           "nafnet-known-psf: its pre-training across the lens family, resumable)")
+                           "nafnet-known-psf, learned-reader-psf: their pre-trainings across the lens family, "
+                           "resumable)")
     ship.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
                      help="budget: %(choices)s (default: quick)")
     ship.add_argument("--seed", type=int, default=0, help="training seed (default 0)")

@@ -1,8 +1,9 @@
 """Ship a lens-independent trained attacker's weights in the package: ``python -m benchmark pretrain-attacker``.
 
-Three qualify: ``nafnet-known-psf``'s pre-training across the lens family (``ship_known_psf``),
+These qualify: ``nafnet-known-psf``'s pre-training across the lens family (``ship_known_psf``),
 ``learned-reader``'s pre-training on sharp plates (``ship_reader``; every lens's fit
-starts from it) and ``nafnet-generic`` (its training knows no lens, see ``attacks.restorers.nafnet_generic``). The
+starts from it), ``learned-reader-psf``'s across the lens family on Wiener estimates (``ship_reader_family``)
+and ``nafnet-generic`` (its training knows no lens, see ``attacks.restorers.nafnet_generic``). The
 command fits it exactly as a run does (the profile's budget, the TRAIN crops of the seed; loaded from
 the cache when a run already trained it), then writes ``attacks/weights/nafnet-generic-<profile>-s<seed>
 .safetensors`` and its provenance: the cache key the attacker will look it up by, the commit, the
@@ -25,6 +26,7 @@ import lenses
 from attacks.training.degradations import degrade
 from attacks.restorers.gray_world import gray_world_balance
 from attacks.readers.learned_reader import WIDTH, LearnedReader, pack_weights, pretrain, pretrained_key, unpack_weights
+from attacks.readers.learned_reader_psf import LearnedReaderPSF, psf_family_key
 from attacks.training.lens_family import LensFamily
 from attacks.training.reader_family_training import FAMILY_BUDGET, pretrain_family
 from common.plate_render import PLATE_FORMAT
@@ -92,25 +94,32 @@ def family_key(fmt: str, seed: int = 0) -> dict[str, Any]:
             "seed": seed}
 
 
-def ship_reader_family(args: argparse.Namespace) -> int:
-    """Pre-train ``learned-reader`` across the lens family from the shipped sharp start and ship it with
-    its held-out curve (``attacks.training.reader_family_training``). Resumable: the checkpoint after every
-    evaluation is in the cache (``<cache>/pretrain/learned-reader-family-s<seed>.pt``)."""
+def ship_reader_family(args: argparse.Namespace, reads: str = "sensor") -> int:
+    """Pre-train the learned reader across the lens family from the shipped sharp start and ship it with
+    its held-out curve (``attacks.training.reader_family_training``): reading the sensor image
+    (``learned-reader --family``), or the Wiener estimate with the lens's PSF (``learned-reader-psf``,
+    which reads with it). Resumable: the checkpoint after every evaluation is in the cache
+    (``<cache>/pretrain/<name>-s<seed>.pt``)."""
     sharp = find_shipped(LearnedReader.name, pretrained_key(PLATE_FORMAT, args.seed))
     if sharp is None:
         raise SystemExit(f"error: the family pre-training continues the sharp start, and the package ships none for "
                          f"seed {args.seed}; make it first: python -m benchmark pretrain-attacker learned-reader "
                          f"--seed {args.seed}")
+    if reads == "wiener":
+        kind, name, key = LearnedReaderPSF.name, f"learned-reader-psf-family-s{args.seed}", psf_family_key(PLATE_FORMAT, args.seed)
+        command = f"python -m benchmark pretrain-attacker learned-reader-psf --seed {args.seed}"
+    else:
+        kind, name, key = LearnedReader.name, f"learned-reader-family-s{args.seed}", family_key(PLATE_FORMAT, args.seed)
+        command = f"python -m benchmark pretrain-attacker learned-reader --family --seed {args.seed}"
     net = LearnedReader.build(PLATE_FORMAT, args.seed)
     unpack_weights(net, sharp.data)
-    checkpoint = cache_root() / "pretrain" / f"learned-reader-family-s{args.seed}.pt"
-    curve, held_out = pretrain_family(net, PLATE_FORMAT, args.seed, checkpoint=checkpoint, progress=print)
-    made = {"commit": git_commit(), "command": f"python -m benchmark pretrain-attacker learned-reader --family --seed {args.seed}",
+    checkpoint = cache_root() / "pretrain" / f"{name}.pt"
+    curve, held_out = pretrain_family(net, PLATE_FORMAT, args.seed, checkpoint=checkpoint, progress=print, reads=reads)
+    made = {"commit": git_commit(), "command": command, "reads": reads,
             "seed": args.seed, "fit_s": curve.seconds, "threads": torch.get_num_threads(),
             "packages": package_versions(), "curve": curve.to_dict(), "heldout_lenses": held_out,
             "start": sharp.describe()}
-    path = write_shipped(f"learned-reader-family-s{args.seed}", LearnedReader.name, family_key(PLATE_FORMAT, args.seed),
-                         pack_weights(net, curve), made, args.out)
+    path = write_shipped(name, kind, key, pack_weights(net, curve), made, args.out)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB) and its provenance; held-out exact-plate accuracy "
           f"{curve.accuracy[curve.kept]:.3f} (start {curve.accuracy[0]:.3f}) at step {curve.best_step} of "
           f"{curve.steps[-1]} ({curve.stopped}{', still rising' if curve.still_rising else ''})")
@@ -146,6 +155,8 @@ def main(args: argparse.Namespace) -> int:
         raise SystemExit(f"error: --family is a pre-training of learned-reader, not of {args.attacker}")
     if args.attacker == "learned-reader":
         return ship_reader_family(args) if getattr(args, "family", False) else ship_reader(args)
+    if args.attacker == "learned-reader-psf":
+        return ship_reader_family(args, reads="wiener")
     if args.attacker == "nafnet-known-psf":
         return ship_known_psf(args)
     profile = get_profile(args.profile)

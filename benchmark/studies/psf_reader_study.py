@@ -3,8 +3,9 @@
 For each lens (default: ideal, defocus, gp, os, os-d-1000) it rebuilds the lens of the published quick
 entry at seed 0 (its ``lens_spec``), makes the run's plate set exactly as the run did
 (``benchmark.runner.tasks.plate_set``: the same val frames, windows and sensor noise), and reads it with
-``learned-reader-psf`` (and, with ``--family-weights FILE``, with the learned reader's network holding
-those weights on the sensor image: an unshipped lens-family pre-training). Its per-plate outcomes are
+``learned-reader-psf`` (its shipped network, and the sharp-plate start it was pre-trained from; with
+``--family-weights FILE`` also with the learned reader's network holding those weights on the sensor image:
+an unshipped lens-family pre-training). Its per-plate outcomes are
 paired by plate id with the entry's seed-0 rows: the per-lens fine-tuned ``learned-reader``, the
 strongest single reader chain of the entry, and the entry's ensemble (a plate read by any of its reader
 chains). The plate ids must agree (that proves the pairing; a mismatch is reported, not paired).
@@ -92,7 +93,8 @@ def measure_lens(name: str, family_weights: Path | None = None, seed: int = 0) -
         plates = plate_set(cfg, seed, lens)
     assert plates is not None, "the quick profile reads plate windows"
     seconds = {"plate_set": round(time.perf_counter() - t0, 1)}
-    readers: dict[str, LearnedReader] = {"learned-reader-psf": LearnedReaderPSF()}
+    readers: dict[str, LearnedReader] = {"learned-reader-psf": LearnedReaderPSF(),
+                                         "learned-reader-psf (sharp start)": LearnedReaderPSF(family=False)}
     if family_weights is not None:
         family = LearnedReader(use_shipped_fit=False)
         family.fit(FitContext(budget=AttackBudget(profile="quick")))  # the sharp start, no lens: then swap in
@@ -105,7 +107,7 @@ def measure_lens(name: str, family_weights: Path | None = None, seed: int = 0) -
     ours: dict[str, dict[str, tuple[int, int]]] = {}
     for label, reader in readers.items():
         t0 = time.perf_counter()
-        if label == "learned-reader-psf":
+        if isinstance(reader, LearnedReaderPSF):
             reader.fit(FitContext(lens=lens, budget=AttackBudget(profile="quick")))
         outcomes, _, _ = read_plates(reader, plates.sensor, plates.scenes, profile.batch_size, "cpu")
         seconds[label] = round(time.perf_counter() - t0, 1)
@@ -126,10 +128,15 @@ def measure_lens(name: str, family_weights: Path | None = None, seed: int = 0) -
     ensemble = {i: (int(any(p[i][0] for p in published.values() if i in p)), ours["learned-reader-psf"][i][1])
                 for i in ids}
     with_psf = {i: (int(ensemble[i][0] or ours["learned-reader-psf"][i][0]), ensemble[i][1]) for i in ids}
+    # The same without the per-lens fine-tuned learned-reader: what it still adds once learned-reader-psf is in.
+    without_tuned = {i: (int(ours["learned-reader-psf"][i][0]
+                             or any(p[i][0] for a, p in published.items() if a != "learned-reader" and i in p)),
+                         ensemble[i][1]) for i in ids}
     best = max((a for a in published if a != "learned-reader"), key=lambda a: sum(hits(published[a], readable)))
     table = {**ours, "learned-reader": published["learned-reader"],
              f"best published chain ({best})": published[best], "published ensemble": ensemble,
-             "published ensemble + learned-reader-psf": with_psf}
+             "published ensemble + learned-reader-psf": with_psf,
+             "published ensemble + learned-reader-psf - learned-reader": without_tuned}
     record: dict[str, Any] = {
         "lens_spec": entry["lens_spec"], "seconds": seconds, "paired": True, "n_plates": len(ids),
         "n_from_32px": len(readable),
@@ -141,6 +148,10 @@ def measure_lens(name: str, family_weights: Path | None = None, seed: int = 0) -
             "learned-reader-psf - best published chain": _compare(hits(ours["learned-reader-psf"], readable),
                                                                   hits(published[best], readable)),
             "ensemble with it - published ensemble": _compare(hits(with_psf, readable), hits(ensemble, readable)),
+            "ensemble with it - the same without learned-reader": _compare(hits(with_psf, readable),
+                                                                         hits(without_tuned, readable)),
+            "learned-reader-psf - its sharp start": _compare(hits(ours["learned-reader-psf"], readable),
+                                                             hits(ours["learned-reader-psf (sharp start)"], readable)),
             **({"family-start - learned-reader": _compare(hits(ours["family-start"], readable),
                                                           hits(published["learned-reader"], readable))}
                if "family-start" in ours else {})},

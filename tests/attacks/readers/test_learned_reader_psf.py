@@ -1,9 +1,12 @@
-"""learned-reader-psf: the sharp-plate reader reading the Wiener estimate of the known lens reads plates
-through a blurring lens that the same network cannot read on the sensor image, with no per-lens fit."""
+"""learned-reader-psf: the reader of Wiener estimates reads plates through a blurring lens that the sharp-plate
+network cannot read on the sensor image, with no per-lens fit; its shipped family pre-training reads a lens it
+never drew better than its sharp start, scores its recorded held-out curve, and leaves clean plates to the
+sharp start."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 import lenses
@@ -36,7 +39,7 @@ def test_it_reads_through_the_defocus_lens_where_the_same_network_on_the_sensor_
     ours, theirs = accuracy(psf_reader, batch), accuracy(sharp_start, batch)
     assert ours >= 0.75 and theirs <= 0.25, (ours, theirs)
     assert report.curve is None and set(report.stage_seconds) == {"start"}  # nothing trained per lens
-    assert psf_reader.describe()["shipped_weights"]["file"] == "learned-reader-sharp-s0.safetensors"
+    assert psf_reader.describe()["shipped_weights"]["file"] == "learned-reader-psf-family-s0.safetensors"
 
 
 def test_without_a_lens_it_reads_the_images_as_they_are():
@@ -44,3 +47,47 @@ def test_without_a_lens_it_reads_the_images_as_they_are():
     reader.fit(FitContext(budget=AttackBudget(profile="quick")))
     images = torch.rand(2, 3, 40, 90)
     assert torch.equal(reader.reader_input(images), images)
+
+
+def test_the_family_pretraining_reads_an_undrawn_lens_better_than_its_sharp_start():
+    """random-zernike lies outside the family's draws (a test lens): its 64 px plates."""
+    lens = lenses.load("random-zernike")
+    family, sharp = LearnedReaderPSF(), LearnedReaderPSF(family=False)
+    for reader in (family, sharp):
+        reader.fit(FitContext(lens=lens, budget=AttackBudget(profile="quick")))
+    assert sharp.describe()["shipped_weights"]["file"] == "learned-reader-sharp-s0.safetensors"
+    batch = plates_through(lens, 64, n=48)
+    ours, start = accuracy(family, batch), accuracy(sharp, batch)
+    assert ours >= start + 0.1, (ours, start)
+
+
+def test_the_shipped_family_pretraining_scores_its_recorded_curve():
+    """Its held-out set (Wiener estimates through lenses of another seed stream) is a function of the seed:
+    the weights, loaded through the checked path, score now what their provenance recorded."""
+    from attacks.readers.learned_reader import unpack_weights
+    from attacks.readers.learned_reader_psf import psf_family_key
+    from attacks.training.lens_family import LensFamily
+    from attacks.training.plate_reader_training import plate_accuracy
+    from attacks.training.reader_family_training import FAMILY_BUDGET, family_held_out
+    from attacks.training.shipped_weights import find_shipped
+    from common.plate_render import PLATE_FORMAT
+
+    shipped = find_shipped(LearnedReaderPSF.name, psf_family_key(PLATE_FORMAT))
+    assert shipped is not None, "the package ships learned-reader-psf's family pre-training"
+    net = LearnedReader.build(PLATE_FORMAT, 0)
+    curve = unpack_weights(net, shipped.data)
+    assert curve is not None and shipped.provenance["made"]["reads"] == "wiener"
+    recorded = curve.per_width[curve.kept]
+    held = family_held_out(LensFamily(), FAMILY_BUDGET, PLATE_FORMAT, 0, "wiener")
+    for width in recorded:
+        score = float(np.mean([plate_accuracy(net.eval(), sets[width]) for _, sets in held]))
+        assert score == pytest.approx(recorded[width], abs=1.5 / FAMILY_BUDGET.steps.eval_plates), width
+
+
+def test_without_a_lens_the_sharp_start_reads_clean_plates():
+    reader = LearnedReaderPSF()
+    reader.fit(FitContext(budget=AttackBudget(profile="quick")))
+    assert reader.describe()["shipped_weights"]["file"] == "learned-reader-sharp-s0.safetensors"
+    plates = simulate_plates(None, 200, (32, 32), np.random.default_rng(2026), torch.Generator().manual_seed(2026), 0.0,
+                             "LLDDDLL", jitter=False)
+    assert accuracy(reader, plates) >= 0.95
