@@ -29,8 +29,8 @@ LEARNED_READER = "learned-reader"
 MEASURED_ADDITIONS: tuple[str, ...] = ("nafnet-known-psf", "nafnet-known-psf>lpdr-oracle")
 # Readers the published entries predate, added because, on those entries' own plates (paired by plate
 # id, leaderboard/studies/psf_reader.json), adding them raises the ensemble's plates read from 32 px by
-# more than the rule's 1 point: the sharp-plate reader on the Wiener estimate of the known lens, which
-# needs no per-lens fit: its network pre-trained across the lens family on Wiener estimates (docs/modelling.md).
+# more than the rule's 1 point: a reader of the Wiener estimate of the known lens, pre-trained once across the
+# lens family on such estimates, which needs no per-lens fit (docs/modelling.md).
 MEASURED_READERS: tuple[str, ...] = ("learned-reader-psf",)
 # The run's default chains: the proposal and the uncorrected image as a reference restorer. The learned
 # reader is always in it (the rule keeps it wherever entries hold it) and stays last of the readers, the
