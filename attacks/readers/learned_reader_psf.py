@@ -34,14 +34,17 @@ from attacks.training.psf_restorer_training import psf_inputs
 from attacks.training.reader_family_training import FAMILY_BUDGET
 from attacks.training.shipped_weights import find_shipped
 
-__all__ = ["LearnedReaderPSF", "psf_family_key"]
+__all__ = ["LearnedReaderPSF", "family_key"]
 
 
-def psf_family_key(fmt: str, seed: int = 0) -> dict[str, Any]:
-    """The key the family pre-training on Wiener estimates is shipped under: it continues the sharp start."""
-    return {"attack": LearnedReaderPSF.name, "stage": "pretrained-family", "reads": "wiener", "format": fmt,
-            "width": WIDTH, "budget": FAMILY_BUDGET.to_dict(), "family": LensFamily().describe(),
-            "start": pretrained_key(fmt, seed), "seed": seed}
+def family_key(fmt: str, seed: int = 0, reads: str = "sensor") -> dict[str, Any]:
+    """The key a learned reader's family pre-training is shipped (and looked up) under; it continues the
+    sharp start. ``reads="wiener"``: ``learned-reader-psf``'s, on Wiener estimates; "sensor":
+    ``learned-reader``'s, on the sensor image (``python -m benchmark pretrain-attacker learned-reader --family``)."""
+    key = {"attack": LearnedReaderPSF.name if reads == "wiener" else LearnedReader.name, "stage": "pretrained-family",
+           "format": fmt, "width": WIDTH, "budget": FAMILY_BUDGET.to_dict(), "family": LensFamily().describe(),
+           "start": pretrained_key(fmt, seed), "seed": seed}
+    return {**key, "reads": reads} if reads == "wiener" else key
 
 
 class LearnedReaderPSF(LearnedReader):
@@ -70,7 +73,7 @@ class LearnedReaderPSF(LearnedReader):
         t0 = time.perf_counter()
         # Without a lens (the sharp scenes) the sharp-plate start reads: the family pre-training reads clean
         # 32 px plates less well (84 % of 200 against 97 %), having learned Wiener estimates instead.
-        family = (find_shipped(self.name, psf_family_key(self.plate_format))
+        family = (find_shipped(self.name, family_key(self.plate_format, reads="wiener"))
                   if self.use_shipped and self.family and ctx.lens is not None else None)
         if family is not None:
             net = self.build(self.plate_format, 0)

@@ -25,10 +25,9 @@ from safetensors.torch import save as save_safetensors
 import lenses
 from attacks.training.degradations import degrade
 from attacks.restorers.gray_world import gray_world_balance
-from attacks.readers.learned_reader import WIDTH, LearnedReader, pack_weights, pretrain, pretrained_key, unpack_weights
-from attacks.readers.learned_reader_psf import LearnedReaderPSF, psf_family_key
-from attacks.training.lens_family import LensFamily
-from attacks.training.reader_family_training import FAMILY_BUDGET, pretrain_family
+from attacks.readers.learned_reader import LearnedReader, pack_weights, pretrain, pretrained_key, unpack_weights
+from attacks.readers.learned_reader_psf import family_key
+from attacks.training.reader_family_training import pretrain_family
 from common.plate_render import PLATE_FORMAT
 from attacks.restorers.nafnet_generic import NafnetGeneric
 from attacks.restorers.nafnet_known_psf import PRETRAIN_SEED, SHIPPED_SCENES, NafnetKnownPSF, pack, shipped_key
@@ -87,13 +86,6 @@ def ship_reader(args: argparse.Namespace) -> int:
     return 0
 
 
-def family_key(fmt: str, seed: int = 0) -> dict[str, Any]:
-    """The key the learned reader's family pre-training is shipped under: it continues the sharp start."""
-    return {"attack": LearnedReader.name, "stage": "pretrained-family", "format": fmt, "width": WIDTH,
-            "budget": FAMILY_BUDGET.to_dict(), "family": LensFamily().describe(), "start": pretrained_key(fmt, seed),
-            "seed": seed}
-
-
 def ship_reader_family(args: argparse.Namespace, reads: str = "sensor") -> int:
     """Pre-train the learned reader across the lens family from the shipped sharp start and ship it with
     its held-out curve (``attacks.training.reader_family_training``): reading the sensor image
@@ -105,12 +97,10 @@ def ship_reader_family(args: argparse.Namespace, reads: str = "sensor") -> int:
         raise SystemExit(f"error: the family pre-training continues the sharp start, and the package ships none for "
                          f"seed {args.seed}; make it first: python -m benchmark pretrain-attacker learned-reader "
                          f"--seed {args.seed}")
-    if reads == "wiener":
-        kind, name, key = LearnedReaderPSF.name, f"learned-reader-psf-family-s{args.seed}", psf_family_key(PLATE_FORMAT, args.seed)
-        command = f"python -m benchmark pretrain-attacker learned-reader-psf --seed {args.seed}"
-    else:
-        kind, name, key = LearnedReader.name, f"learned-reader-family-s{args.seed}", family_key(PLATE_FORMAT, args.seed)
-        command = f"python -m benchmark pretrain-attacker learned-reader --family --seed {args.seed}"
+    key = family_key(PLATE_FORMAT, args.seed, reads)
+    kind, name = key["attack"], f"{key['attack']}-family-s{args.seed}"
+    command = (f"python -m benchmark pretrain-attacker {kind}{' --family' if reads == 'sensor' else ''} "
+               f"--seed {args.seed}")
     net = LearnedReader.build(PLATE_FORMAT, args.seed)
     unpack_weights(net, sharp.data)
     checkpoint = cache_root() / "pretrain" / f"{name}.pt"

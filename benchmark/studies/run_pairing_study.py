@@ -12,8 +12,8 @@ agree, which proves the pairing; a mismatch is reported, not paired).
   difference, and the plates each of the run's chains alone read among those the entry's ensemble missed.
 - Scenes: the ensemble PSNR of both, and the paired per-scene difference (bootstrap); the run's restorers'
   mean PSNR on the same scenes.
-- Costs: each row's wall seconds as the run recorded them (fit and evaluation of that attacker), the run's
-  threads, and the load average when the study ran (the run's own load is not recorded).
+- Costs: each attacker's fit seconds (and the cascade's), as its row measured them; the run's command and
+  wall seconds; the load average when the study ran (the run's own load is not recorded).
 
 Writes ``leaderboard/studies/run_pairing.json`` (merged per lens).
 """
@@ -32,6 +32,7 @@ from benchmark.results import stats
 from benchmark.results.attack_gap import attack_gaps, gap_curves
 from benchmark.results.ensemble import plate_ensemble, seed_plates, seed_scene_names, seed_scenes
 from benchmark.results.entries import entry_name, read_entry
+from benchmark.results.plate_scoring import WIDTH_BINS_PX
 from benchmark.results.schema import Results, Row
 from benchmark.store.provenance import git_commit
 
@@ -41,6 +42,7 @@ ROOT = Path(__file__).resolve().parents[2]
 LEADERBOARD = ROOT / "leaderboard"
 OUT = LEADERBOARD / "studies" / "run_pairing.json"
 FROM_PX = 32
+SECONDS = ("fit_s", "cascade_s")  # what a row measures of its own attacker's cost
 
 
 def _compare(a: np.ndarray, b: np.ndarray, direction: str = "greater") -> dict[str, Any]:
@@ -75,7 +77,7 @@ def _plates(run_rows: list[Row], entry_rows: list[Row], seed: int, study: dict[s
         f"{g.low_px:g}": {"ceiling": round(g.ceiling, 4), "kind": g.ceiling_kind, "gap": round(g.gap, 4)}
         for g in attack_gaps(ensemble, curve, fallback)}
     bins = {}
-    edges = [8, 12, 16, 24, 32, 48, 64, 96, 128, 192, np.inf]
+    edges = [*WIDTH_BINS_PX, np.inf]
     for low, high in zip(edges[:-1], edges[1:]):
         inside = (widths >= low) & (widths < high)
         if inside.any():
@@ -108,8 +110,8 @@ def pair_lens(run_rows: list[Row], lens: str, seed: int, study: dict[str, Any] |
     theirs = [r for r in entry.rows if r.seed == seed]
     return {"plates": _plates(ours, theirs, seed, study, lens, entry.lens_spec),
             "scenes": _scenes(ours, theirs, seed),
-            "wall_s": {r.attack: round(float(r.provenance.get("wall_s", 0.0)), 1) for r in ours
-                       if r.kind in ("restorer", "reader", "chain") and r.status == "ok"}}
+            "seconds": {r.attack: {k: round(float(v), 1) for k, v in r.metrics.items() if k in SECONDS}
+                        for r in ours if r.ok and any(k in r.metrics for k in SECONDS)}}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -131,8 +133,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{lens}: no published quick entry; skipped")
             continue
         pairing = pair_lens(results.rows, lens, args.seed, observer)
-        pairing["run"] = {"folder": str(args.run), "meta": {k: results.meta.get(k) for k in ("date", "git_commit",
-                                                                                            "code_version", "threads")}}
+        pairing["run"] = {"folder": str(args.run), "command": results.meta.get("command"),
+                          "wall_s": results.meta.get("wall_s")}
         record["lenses"][lens] = pairing
         p, s = pairing["plates"], pairing["scenes"]
         line = f"{lens}: "

@@ -65,14 +65,14 @@ def test_the_shipped_family_pretraining_scores_its_recorded_curve():
     """Its held-out set (Wiener estimates through lenses of another seed stream) is a function of the seed:
     the weights, loaded through the checked path, score now what their provenance recorded."""
     from attacks.readers.learned_reader import unpack_weights
-    from attacks.readers.learned_reader_psf import psf_family_key
+    from attacks.readers.learned_reader_psf import family_key
     from attacks.training.lens_family import LensFamily
     from attacks.training.plate_reader_training import plate_accuracy
     from attacks.training.reader_family_training import FAMILY_BUDGET, family_held_out
     from attacks.training.shipped_weights import find_shipped
     from common.plate_render import PLATE_FORMAT
 
-    shipped = find_shipped(LearnedReaderPSF.name, psf_family_key(PLATE_FORMAT))
+    shipped = find_shipped(LearnedReaderPSF.name, family_key(PLATE_FORMAT, reads="wiener"))
     assert shipped is not None, "the package ships learned-reader-psf's family pre-training"
     net = LearnedReader.build(PLATE_FORMAT, 0)
     curve = unpack_weights(net, shipped.data)

@@ -11,16 +11,13 @@ from benchmark.studies import run_pairing_study
 from benchmark.studies.run_pairing_study import LEADERBOARD, pair_lens
 
 
-def entry_rows(lens: str):
-    return read_entry(LEADERBOARD / "entries" / f"{lens}__quick__synthetic.json").rows
-
-
-def entry_settings(lens: str):
-    return read_entry(LEADERBOARD / "entries" / f"{lens}__quick__synthetic.json").settings
+def entry(lens: str):
+    return read_entry(LEADERBOARD / "entries" / f"{lens}__quick__synthetic.json")
 
 
 def test_an_entry_paired_with_itself_differs_by_nothing(tmp_path):
-    rows = entry_rows("gp")
+    gp = entry("gp")
+    rows = gp.rows
     record = pair_lens(rows, "gp", 0, None)
     plates, scenes = record["plates"], record["scenes"]
     assert plates["paired"] and scenes["paired"]
@@ -31,14 +28,14 @@ def test_an_entry_paired_with_itself_differs_by_nothing(tmp_path):
     assert sum(b["n"] for b in plates["bins"].values()) == plates["n_plates"]
     # The command: a run folder holding the entry's rows as its results.
     (tmp_path / "run").mkdir()
-    (tmp_path / "run" / "results.json").write_text(json.dumps(Results(rows, entry_settings("gp")).to_json()))
+    (tmp_path / "run" / "results.json").write_text(json.dumps(Results(rows, gp.settings).to_json()))
     out = tmp_path / "pairing.json"
     assert run_pairing_study.main(["--run", str(tmp_path / "run"), "--lens", "gp", "--out", str(out)]) == 0
     assert json.loads(out.read_text())["lenses"]["gp"]["plates"]["paired"]
 
 
 def test_a_run_with_other_plates_is_reported_not_paired():
-    rows = entry_rows("gp")
+    rows = entry("gp").rows
     renamed = [dataclasses.replace(r, units=dataclasses.replace(r.units, prefix="other:"))
                if r.units is not None and r.units.unit == "plate" else r for r in rows]
     record = pair_lens(renamed, "gp", 0, None)
