@@ -36,9 +36,10 @@ from torch import Tensor
 
 from attacks.base import FitContext, FitCurve as ReportedCurve, FitReport, PlateRead, ReadHints, Reader, ThreatModel
 from attacks.networks.plate_cnn import PlateCNN
-from attacks.training.plate_reader_training import Camera, FitCurve, ReaderBudget, held_out_set, train_reader
+from attacks.training.plate_reader_training import FitCurve, ReaderBudget, held_out_set, train_reader
+from attacks.training.reader_family_training import lens_camera
 from common.plate_render import PLATE_FORMAT, format_alphabets
-from attacks.readers.plates.plate_sim import plate_crops, psf_radius_px
+from attacks.readers.plates.plate_sim import plate_crops
 from attacks.training.restorer_training import lens_key
 from attacks.training.shipped_weights import Shipped, find_shipped, key_text
 
@@ -126,6 +127,9 @@ class LearnedReader(Reader):
     requires: ClassVar[frozenset[str]] = frozenset()
     # In the standard ensemble (benchmark.runner.defaults.STANDARD_ENSEMBLE); --all-chains adds it too.
     run_by_default: ClassVar[bool] = True
+    # What the network reads and is fine-tuned on: the sensor image ("wiener": its Wiener estimate,
+    # ``learned-reader-psf``); ``attacks.training.reader_family_training.lens_camera``.
+    reads: ClassVar[str] = "sensor"
 
     def __init__(self, min_width_px: int = 8, use_shipped: bool = True, use_shipped_fit: bool = True,
                  fit_seed: int | None = 0) -> None:
@@ -149,15 +153,6 @@ class LearnedReader(Reader):
                     f"to simulate its training plates; {type(ctx.lens).__name__} does not")
         return None
 
-    def _camera(self, ctx: FitContext) -> Camera:
-        lens: Any = ctx.lens
-        device = ctx.device
-
-        def camera(x: Tensor, generator: torch.Generator) -> Tensor:
-            # The noise draws come from a CPU generator whatever the device, so a fit is the same on both.
-            return lens(x.to(device), generator=generator if device == "cpu" else None).cpu()
-        return camera
-
     def fit(self, ctx: FitContext) -> FitReport:
         """Fine-tune (or load from ``ctx.artifacts``) the reader on plates through ``ctx.lens``; with no
         lens (the sharp scenes) read with the start, pre-trained on sharp plates, as it is."""
@@ -171,14 +166,13 @@ class LearnedReader(Reader):
         pretrain_budget = start_budget(profile)
         t0 = time.perf_counter()
         net, start = self._start(seed, pretrain_budget)
-        self.budget = BUDGETS[profile]
+        self.budget = self.fine_tune_budget(profile)
         seconds = {"start": time.perf_counter() - t0}
         if lens is None:  # the sharp scenes themselves: the start was trained on sharp plates, read with it
             self.spread_px, self.budget, self.trained = 0.0, None, False
             self.net = net.to(ctx.device).eval()
             return FitReport(stage_seconds=seconds)
-        psf = lens.psf().detach().cpu()
-        self.spread_px, half = psf_radius_px(psf), psf.shape[-1] // 2
+        camera, self.spread_px, half = lens_camera(lens, self.reads, ctx.device)
         key = {"attack": self.name, "budget": self.budget.to_dict(), "lens": lens_key(lens), "format": self.plate_format,
                "start": start, "seed": seed, "keeps": "best-evaluation"}
         self.fit_key = key
@@ -197,7 +191,6 @@ class LearnedReader(Reader):
                 data, self.shipped_fit = None, None
                 net, _ = self._start(seed, pretrain_budget)  # a failed load may have overwritten some weights
         if data is None:
-            camera = self._camera(ctx)
             held_out = held_out_set(camera, self.budget, self.spread_px, half, self.plate_format, seed)
             self.curve = train_reader(net, [camera], self.budget, self.spread_px, half, self.plate_format, seed,
                                       held_out)
@@ -207,6 +200,10 @@ class LearnedReader(Reader):
         seconds["fine-tune" if self.trained else "load"] = time.perf_counter() - t0 - seconds["start"]
         self.net = net.to(ctx.device).eval()
         return self.report(seconds)
+
+    def fine_tune_budget(self, profile: str) -> ReaderBudget:
+        """The per-lens fine-tune's budget for a run profile (``BUDGETS``)."""
+        return BUDGETS[profile]
 
     def report(self, stage_seconds: dict[str, float] | None = None) -> FitReport:
         """The ``FitReport`` of the last fit: its held-out curve (mean accuracy over the width bins) and

@@ -48,7 +48,7 @@ from attacks.training.plate_reader_training import (
 from attacks.backends.real_fft import OtfCache
 from attacks.training.psf_restorer_training import psf_inputs, stream_generator
 
-__all__ = ["FAMILY_BUDGET", "READS", "FamilyCamera", "family_camera", "family_held_out", "pretrain_family"]
+__all__ = ["FAMILY_BUDGET", "READS", "FamilyCamera", "family_camera", "family_held_out", "lens_camera", "pretrain_family"]
 
 READS = ("sensor", "wiener")
 """What the reader reads (module docs)."""
@@ -89,19 +89,29 @@ class FamilyCamera:
 def family_camera(family: LensFamily, drawn: FamilyLens, reads: str = "sensor") -> FamilyCamera:
     """The camera of a drawn lens (CPU; the mask lens is shared, so use it before the next draw): the
     sensor image, or with ``reads="wiener"`` its Wiener estimate (module docs; crops then hold no margin)."""
+    camera, spread_px, half = lens_camera(family.build(drawn), reads)
+    return FamilyCamera(drawn, camera, spread_px, half)
+
+
+def lens_camera(lens: Any, reads: str = "sensor", device: str = "cpu"
+                ) -> tuple[Callable[[Tensor, torch.Generator], Tensor], float, int]:
+    """``(camera, spread_px, psf_half_px)`` of one lens (``lenses.Lens``, or anything with ``psf()``,
+    ``gain()`` and ``lens(x, generator=g)``): its camera gives the sensor image of plates, or with
+    ``reads="wiener"`` their Wiener estimate (module docs); ``spread_px`` is the margin a crop holds for
+    the blur (none for a Wiener estimate). The noise comes from a CPU generator whatever ``device``, and the
+    camera returns CPU tensors, so a fit is the same on every device."""
     if reads not in READS:
         raise ValueError(f"reads={reads!r}: must be one of {', '.join(READS)}")
-    lens = family.build(drawn)
     with torch.no_grad():
         psf = lens.psf().detach().cpu()
-        gain = lens.gain().detach().cpu()
+        gain = lens.gain().detach().cpu() if reads == "wiener" else None
     otf = OtfCache(psf) if reads == "wiener" else None
 
     def camera(x: Tensor, generator: torch.Generator) -> Tensor:
         with torch.no_grad():
-            sensor = lens(x, generator=generator)
-            return sensor if otf is None else psf_inputs(sensor, otf, gain)[:, :3]
-    return FamilyCamera(drawn, camera, psf_radius_px(psf) if otf is None else 0.0, psf.shape[-1] // 2)
+            sensor = lens(x.to(device), generator=generator if device == "cpu" else None).cpu()
+            return sensor if otf is None or gain is None else psf_inputs(sensor, otf, gain)[:, :3]
+    return camera, psf_radius_px(psf) if otf is None else 0.0, psf.shape[-1] // 2
 
 
 def family_held_out(family: LensFamily, budget: FamilyBudget, fmt: str, seed: int, reads: str = "sensor"

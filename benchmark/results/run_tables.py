@@ -23,7 +23,7 @@ SECTIONS = (
     ("Restorers (deblurring attacks)", ("restorer",), ["threat_model", "psnr_db", "ssim", "fit_s", "images_per_s"],
      ("psnr_db",)),
     ("Plate readers (on the sensor image and after each restorer)", ("reader", "chain"),
-     ["threat_model", "plate_acc", "plate_cer", "plate_det", "n_plates", "images_per_s"], ("plate_acc",)),
+     ["threat_model", "plate_acc", "plate_cer", "plate_det", "n_plates", "fit_s", "images_per_s"], ("plate_acc",)),
     ("References", ("reference",), ["threat_model", "psnr_db", "ssim", "plate_acc", "images_per_s"],
      ("psnr_db", "plate_acc")),
     ("Attack-independent bound", ("bound",),

@@ -360,6 +360,7 @@ class ReadyReader:
     fit_error: RowError | None
     described: dict = field(default_factory=dict)
     notes: dict[str, str] = field(default_factory=dict)  # what its fit says of itself (`fit_notes`)
+    fit_s: float | None = None  # the seconds its fit took here (a cache hit: the load)
 
 
 def _flag(value: bool) -> str:
@@ -394,14 +395,17 @@ def fit_readers(target: Target, readers: Sequence[attacks.Reader], cfg: RunConfi
         if reason and not isinstance(reason, RowError):
             log.info("%s on %s skipped: %s", reader.name, target.lens_name, reason)
             continue
+        t0 = time.perf_counter()
         error = reason if isinstance(reason, RowError) else attempt(reader.name, "fit", lambda: reader.fit(ctx),
                                                                      cfg.budget_s, target.ctx.cache_dir)
         if isinstance(error, RowError):
             ready.append(ReadyReader(reader, error, described))
             continue
+        fit_s = time.perf_counter() - t0
         # The settings keep the description made before the fit; the fit's report on itself goes in the notes.
         after = describe(reader)
-        ready.append(ReadyReader(reader, after if isinstance(after, RowError) else None, described, fit_notes(error)))
+        ready.append(ReadyReader(reader, after if isinstance(after, RowError) else None, described, fit_notes(error),
+                                 fit_s))
     return ready
 
 
@@ -438,6 +442,8 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
     outcomes, timing, out.reads[chain] = result
     if target.plates is not None:
         timing["n_frames"] = float(target.plates.n_frames)
+    if restorer is None and ready.fit_s is not None:  # the reader's own row carries its fit; its chains do not
+        timing["fit_s"] = ready.fit_s
     # A chain needs what its strongest part needs (a known-PSF restorer's lens access, say).
     threat = reader.threat_model if restorer is None else attacks.ThreatModel.strongest(
         reader.threat_model, out.threat_models[restorer])

@@ -3,7 +3,8 @@
 For each lens (default: ideal, defocus, gp, os, os-d-1000) it rebuilds the lens of the published quick
 entry at seed 0 (its ``lens_spec``), makes the run's plate set exactly as the run did
 (``benchmark.runner.tasks.plate_set``: the same val frames, windows and sensor noise), and reads it with
-``learned-reader-psf`` (its shipped network, and the sharp-plate start it was pre-trained from; with
+``learned-reader-psf`` (its shipped family network, zero-shot as the standard ensemble reads; that network
+fine-tuned on the lens, ``learned-reader-psf-tuned``; and the sharp-plate start it was pre-trained from; with
 ``--family-weights FILE`` also with the learned reader's network holding those weights on the sensor image:
 an unshipped lens-family pre-training). Its per-plate outcomes are
 paired by plate id with the entry's seed-0 rows: the per-lens fine-tuned ``learned-reader``, the
@@ -28,7 +29,7 @@ import torch
 
 from attacks.base import AttackBudget, FitContext
 from attacks.readers.learned_reader import LearnedReader, unpack_weights
-from attacks.readers.learned_reader_psf import LearnedReaderPSF
+from attacks.readers.learned_reader_psf import LearnedReaderPSF, LearnedReaderPSFTuned
 from attacks.readers.plates.plate_sim import psf_radius_px
 from attacks.training.shipped_weights import read_checked
 from benchmark.results import stats
@@ -94,6 +95,7 @@ def measure_lens(name: str, family_weights: Path | None = None, seed: int = 0) -
     assert plates is not None, "the quick profile reads plate windows"
     seconds = {"plate_set": round(time.perf_counter() - t0, 1)}
     readers: dict[str, LearnedReader] = {"learned-reader-psf": LearnedReaderPSF(),
+                                         "learned-reader-psf-tuned": LearnedReaderPSFTuned(),
                                          "learned-reader-psf (sharp start)": LearnedReaderPSF(family=False)}
     if family_weights is not None:
         family = LearnedReader(use_shipped_fit=False)
@@ -105,10 +107,15 @@ def measure_lens(name: str, family_weights: Path | None = None, seed: int = 0) -
         family.spread_px = psf_radius_px(lens.psf().detach())  # its crops as its training cut them for this lens
         readers["family-start"] = family
     ours: dict[str, dict[str, tuple[int, int]]] = {}
+    fits: dict[str, Any] = {}
     for label, reader in readers.items():
         t0 = time.perf_counter()
         if isinstance(reader, LearnedReaderPSF):
             reader.fit(FitContext(lens=lens, budget=AttackBudget(profile="quick")))
+            if reader.curve is not None:
+                fits[label] = {"fit_s": round(time.perf_counter() - t0, 1), "steps": reader.curve.steps,
+                               "held_out": [round(a, 4) for a in reader.curve.accuracy],
+                               "kept_step": reader.curve.best_step, "stopped": reader.curve.stopped}
         outcomes, _, _ = read_plates(reader, plates.sensor, plates.scenes, profile.batch_size, "cpu")
         seconds[label] = round(time.perf_counter() - t0, 1)
         units = plate_units(outcomes)
@@ -132,13 +139,20 @@ def measure_lens(name: str, family_weights: Path | None = None, seed: int = 0) -
     without_tuned = {i: (int(ours["learned-reader-psf"][i][0]
                              or any(p[i][0] for a, p in published.items() if a != "learned-reader" and i in p)),
                          ensemble[i][1]) for i in ids}
+    tuned = ours["learned-reader-psf-tuned"]
+    # The ensemble with the per-lens fine-tuned reader in place of the zero-shot one, with and without learned-reader.
+    with_tuned = {i: (int(ensemble[i][0] or tuned[i][0]), ensemble[i][1]) for i in ids}
+    tuned_without = {i: (int(tuned[i][0] or any(p[i][0] for a, p in published.items() if a != "learned-reader"
+                                                  and i in p)), ensemble[i][1]) for i in ids}
     best = max((a for a in published if a != "learned-reader"), key=lambda a: sum(hits(published[a], readable)))
     table = {**ours, "learned-reader": published["learned-reader"],
              f"best published chain ({best})": published[best], "published ensemble": ensemble,
              "published ensemble + learned-reader-psf": with_psf,
-             "published ensemble + learned-reader-psf - learned-reader": without_tuned}
+             "published ensemble + learned-reader-psf - learned-reader": without_tuned,
+             "published ensemble + learned-reader-psf-tuned": with_tuned,
+             "published ensemble + learned-reader-psf-tuned - learned-reader": tuned_without}
     record: dict[str, Any] = {
-        "lens_spec": entry["lens_spec"], "seconds": seconds, "paired": True, "n_plates": len(ids),
+        "lens_spec": entry["lens_spec"], "seconds": seconds, "fits": fits, "paired": True, "n_plates": len(ids),
         "n_from_32px": len(readable),
         "readers": {label: {"bins": _bins(hits(t, ids), widths),
                             f"from_{FROM_PX}px": round(float(np.mean(hits(t, readable))), 4)} for label, t in table.items()},
@@ -150,6 +164,11 @@ def measure_lens(name: str, family_weights: Path | None = None, seed: int = 0) -
             "ensemble with it - published ensemble": _compare(hits(with_psf, readable), hits(ensemble, readable)),
             "ensemble with it - the same without learned-reader": _compare(hits(with_psf, readable),
                                                                          hits(without_tuned, readable)),
+            "learned-reader-psf-tuned - learned-reader-psf": _compare(hits(tuned, readable),
+                                                                      hits(ours["learned-reader-psf"], readable)),
+            "ensemble with it tuned - ensemble with it": _compare(hits(with_tuned, readable), hits(with_psf, readable)),
+            "ensemble with it tuned - the same without learned-reader": _compare(hits(with_tuned, readable),
+                                                                               hits(tuned_without, readable)),
             "learned-reader-psf - its sharp start": _compare(hits(ours["learned-reader-psf"], readable),
                                                              hits(ours["learned-reader-psf (sharp start)"], readable)),
             **({"family-start - learned-reader": _compare(hits(ours["family-start"], readable),

@@ -82,8 +82,10 @@ def test_rows_follow_the_schema(smoke_run):
             assert 0 <= r.metrics["plate_acc"] <= 1 and r.metrics["n_plates"] >= 0
             low, high = r.interval("plate_acc")
             assert r.interval_methods["plate_acc"] == "wilson" and 0 <= low <= r.metrics["plate_acc"] <= high <= 1
+        if r.kind == "reader":  # its own row carries its fit's seconds (what a lens costs); its chains do not
+            assert r.metrics["fit_s"] >= 0
         if r.kind == "chain":
-            assert settings["restorer"]["name"] == r.restorer
+            assert settings["restorer"]["name"] == r.restorer and "fit_s" not in r.metrics
         if r.kind == "utility":
             m = r.metrics
             assert 0 <= m["miou"] <= m["mean_acc"] + 1e-9 and 0 <= m["overall_acc"] <= 1  # IoU <= recall per class

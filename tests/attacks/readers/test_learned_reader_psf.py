@@ -1,7 +1,8 @@
 """learned-reader-psf: the reader of Wiener estimates reads plates through a blurring lens that the sharp-plate
 network cannot read on the sensor image, with no per-lens fit; its shipped family pre-training reads a lens it
 never drew better than its sharp start, scores its recorded held-out curve, and leaves clean plates to the
-sharp start."""
+sharp start; its per-lens fine-tune starts from the family network, keeps it when it cannot beat it, and is
+deterministic and cached."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import torch
 import lenses
 from attacks.base import AttackBudget, FitContext, ReadHints
 from attacks.readers.learned_reader import LearnedReader
-from attacks.readers.learned_reader_psf import LearnedReaderPSF
+from attacks.readers.learned_reader_psf import LearnedReaderPSF, LearnedReaderPSFTuned
 from attacks.readers.plates.plate_sim import psf_radius_px, simulate_plates
 
 
@@ -91,3 +92,25 @@ def test_without_a_lens_the_sharp_start_reads_clean_plates():
     plates = simulate_plates(None, 200, (32, 32), np.random.default_rng(2026), torch.Generator().manual_seed(2026), 0.0,
                              "LLDDDLL", jitter=False)
     assert accuracy(reader, plates) >= 0.95
+
+
+def test_the_per_lens_fine_tune_starts_from_the_family_network_and_never_keeps_worse_than_it():
+    """Smoke budget on defocus: the start is scored first (step 0) and the weights of the best evaluation are
+    kept, so the fit's held-out score is at least the family network's; two fits are identical; a second fit
+    on the same store loads the first; the reader's own crops hold no blur margin (it reads Wiener estimates)."""
+    from test_learned_reader import MemoryStore
+
+    lens = lenses.load("defocus")
+    store = MemoryStore()
+    first, again, alone = LearnedReaderPSFTuned(), LearnedReaderPSFTuned(), LearnedReaderPSFTuned()
+    report = first.fit(FitContext(lens=lens, budget=AttackBudget(profile="smoke"), artifacts=store))
+    curve = first.curve
+    assert first.trained and curve is not None and curve.steps[0] == 0 and report.curve is not None
+    assert curve.accuracy[curve.kept] == max(curve.accuracy) >= curve.accuracy[0]
+    assert first.fit_key is not None and first.fit_key["start"]["shipped"] == "learned-reader-psf-family-s0.safetensors"
+    assert first.spread_px == 0.0 and "fine-tuned on this lens" in first.describe()["recipe"]
+    again.fit(FitContext(lens=lens, budget=AttackBudget(profile="smoke"), artifacts=store))
+    assert again.trained is False and again.curve == curve
+    alone.fit(FitContext(lens=lens, budget=AttackBudget(profile="smoke")))
+    assert (alone.curve.steps, alone.curve.accuracy) == (curve.steps, curve.accuracy) and all(torch.equal(a, b) for a, b in zip(alone.net.state_dict().values(),
+                                                                         first.net.state_dict().values()))

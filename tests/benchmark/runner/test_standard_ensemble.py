@@ -145,3 +145,19 @@ def test_the_fine_tuned_learned_reader_keeps_its_place_beside_the_family_trained
             for lens in study["lenses"].values()]
     assert LEARNED_READER in STANDARD_ENSEMBLE
     assert any(a["verdict"] == "holds" and a["difference_pt"] > 1.0 for a in adds), adds
+
+
+def test_the_per_lens_fine_tune_of_the_psf_reader_joins_the_ensemble_only_where_it_pays():
+    """``learned-reader-psf-tuned`` costs a fine-tune per lens (about 100-200 steps); it is in the standard
+    ensemble exactly when, on the study's plates, the ensemble with it in place of the zero-shot reader reads
+    more than 1 point more, significantly, on some lens (the rule that keeps a chain)."""
+    import json
+    from pathlib import Path
+
+    from attacks.readers.learned_reader_psf import LearnedReaderPSFTuned
+
+    study = json.loads((Path(__file__).resolve().parents[3] / "leaderboard" / "studies" / "psf_reader.json").read_text())
+    gains = [lens["paired_from_32px"]["ensemble with it tuned - ensemble with it"] for lens in study["lenses"].values()]
+    pays = any(g["verdict"] == "holds" and g["difference_pt"] > 1.0 for g in gains)
+    assert (LearnedReaderPSFTuned.name in STANDARD_ENSEMBLE) == pays, gains
+    assert LearnedReaderPSFTuned.run_by_default == pays
