@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -115,7 +116,8 @@ def main(argv: list[str] | None = None) -> int:
         previous["lenses"][name] = measure_lens(name, args.tuned)
         previous.update({"commit": git_commit(), "packages": package_versions(), "threads": torch.get_num_threads(),
                          "load_average_1min": os.getloadavg()[0],
-                         "command": "python -m benchmark.studies.known_psf_study " + " ".join(argv or [])})
+                         "command": "python -m benchmark.studies.known_psf_study " + " ".join(
+                             sys.argv[1:] if argv is None else argv)})
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(previous, indent=1) + "\n")  # after each lens: an interrupted study keeps what it measured
     return 0
