@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import ast
 import datetime as _dt
 import functools
 import hashlib
+import json
 import os
 import platform
 import subprocess
@@ -44,17 +46,25 @@ CODE_VERSION_EXCLUDES = ("benchmark/publish/", "benchmark/studies/", "benchmark/
 def code_version() -> str:
     """SHA-256 (16 hex digits) over the files of the packages ``lenses``, ``attacks`` and ``benchmark``
     (sources, shipped weights and tables; not CODE_VERSION_EXCLUDES, ``__pycache__`` or ``*.md``) and
-    the versions of the packages that shape the numbers.
+    the versions of the packages that shape the numbers. A Python source counts by what it does
+    (``source_digest``: its syntax tree without docstrings), so editing a comment, a docstring or the
+    layout leaves every cached task result valid.
 
     Two processes with the same code version compute the same task results, whatever commit they
     were started from: a long job (``publish``) interrupted at one commit resumes at a later one
     that changed only docs, tests or the excluded modules. Read once per process, like git_commit.
     """
-    return code_digest(Path(__file__).resolve().parents[2])
+    from benchmark.store.cache import cache_root
+
+    return code_digest(Path(__file__).resolve().parents[2], memo=cache_root() / "code-digests.json")
 
 
-def code_digest(root: Path) -> str:
-    """code_version's digest of the packages under `root`."""
+def code_digest(root: Path, memo: Path | None = None) -> str:
+    """code_version's digest of the packages under `root`. `memo`: a JSON file of source digests by the
+    SHA-256 of their bytes, so that only sources changed since it was written are parsed (parsing every
+    source takes about a second); unreadable, it is rebuilt; written atomically, so runs may share it."""
+    known = _read_memo(memo)
+    used: dict[str, str] = {}
     digest = hashlib.sha256(package_versions().encode())
     for package in ("lenses", "attacks", "benchmark"):
         for path in sorted((root / package).rglob("*")):
@@ -62,8 +72,50 @@ def code_digest(root: Path) -> str:
             if (not path.is_file() or "__pycache__" in path.parts or rel.endswith((".md", ".pyc"))
                     or rel.startswith(CODE_VERSION_EXCLUDES)):
                 continue
-            digest.update(rel.encode() + b"\0" + hashlib.sha256(path.read_bytes()).digest())
+            data = path.read_bytes()
+            raw = hashlib.sha256(data).hexdigest()
+            if rel.endswith(".py"):
+                used[raw] = known.get(raw) or source_digest(data).hex()
+                digest.update(rel.encode() + b"\0" + bytes.fromhex(used[raw]))
+            else:
+                digest.update(rel.encode() + b"\0" + bytes.fromhex(raw))
+    if memo is not None and used != known:
+        _write_memo(memo, used)
     return digest.hexdigest()[:16]
+
+
+def _read_memo(memo: Path | None) -> dict[str, str]:
+    try:
+        loaded = json.loads(memo.read_text()) if memo is not None and memo.exists() else {}
+    except (OSError, ValueError):
+        return {}
+    return {k: v for k, v in loaded.items() if isinstance(v, str) and len(v) == 64} if isinstance(loaded, dict) else {}
+
+
+def _write_memo(memo: Path, digests: dict[str, str]) -> None:
+    try:
+        memo.parent.mkdir(parents=True, exist_ok=True)
+        tmp = memo.with_name(f"{memo.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(digests))
+        tmp.replace(memo)
+    except OSError:  # a read-only cache: the digest is still right, only slower next time
+        pass
+
+
+def source_digest(source: bytes) -> bytes:
+    """SHA-256 of a Python source's syntax tree with its docstrings dropped (no line numbers, comments or
+    layout); of the bytes themselves where it does not parse."""
+    try:
+        tree = ast.parse(source)
+    except (SyntaxError, ValueError):
+        return hashlib.sha256(source).digest()
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and body
+                and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)):
+            node.body = body[1:] or [ast.Pass()]
+    return hashlib.sha256(b"ast\0" + ast.dump(tree).encode()).digest()
 
 
 def package_versions() -> str:

@@ -51,3 +51,34 @@ def test_code_version_follows_what_results_depend_on(tmp_path):
     (tmp_path / "benchmark/results/new.py").write_text("x")  # a new source file counts too
     assert provenance.code_digest(tmp_path) != before
     assert len(provenance.code_version()) == 16
+
+
+def test_a_comment_docstring_or_layout_edit_keeps_the_code_version_and_a_statement_edit_does_not(tmp_path):
+    source = tmp_path / "attacks" / "a.py"
+    source.parent.mkdir(parents=True)
+    source.write_text('"""Module."""\n\ndef f(x):\n    """Doubles."""\n    return 2 * x  # twice\n')
+    base = provenance.code_digest(tmp_path)
+    for same in ('"""Module, reworded."""\ndef f(x):\n    return 2 * x\n',
+                 '# a new comment\n"""Module."""\n\n\ndef f(x):\n    """Doubles x."""\n\n    return 2*x\n'):
+        source.write_text(same)
+        assert provenance.code_digest(tmp_path) == base, same
+    for other in ('def f(x):\n    return 3 * x\n', 'def f(x):\n    "x"\n    return 2 * x\n    "y"\n',
+                  'def f(x):\n    return 2 * x +\n'):  # the last does not parse: its bytes count
+        source.write_text(other)
+        assert provenance.code_digest(tmp_path) != base, other
+
+
+def test_the_source_digest_memo_is_used_and_rebuilt_when_unreadable(tmp_path, monkeypatch):
+    source = tmp_path / "lenses" / "optics.py"
+    source.parent.mkdir(parents=True)
+    source.write_text("x = 1\n")
+    memo = tmp_path / "cache" / "code-digests.json"
+    base = provenance.code_digest(tmp_path, memo=memo)
+    assert provenance.code_digest(tmp_path) == base and memo.exists()
+    parsed = []
+    real = provenance.source_digest
+    monkeypatch.setattr(provenance, "source_digest", lambda data: parsed.append(data) or real(data))
+    assert provenance.code_digest(tmp_path, memo=memo) == base and parsed == []  # read from the memo
+    memo.write_text("{not json")
+    assert provenance.code_digest(tmp_path, memo=memo) == base and len(parsed) == 1  # parsed again, memo rewritten
+    assert provenance.code_digest(tmp_path, memo=memo) == base and len(parsed) == 1
