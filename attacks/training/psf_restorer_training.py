@@ -24,7 +24,10 @@ the fit stops "flattened" when the best score of the last ``patience_evals`` eva
 last window still gained). The weights of the best evaluation are kept.
 
 Recipe: NAFNet's (``attacks.training.restorer_training``): negative PSNR, AdamW (lr 1e-3, betas 0.9,
-0.9, weight decay 1e-3), cosine schedule over ``max_steps``, gradients clipped to norm 1.
+0.9, weight decay 1e-3), cosine schedule over ``max_steps`` (or, with ``cycle_steps``, cosine cycles with warm
+restarts, SGDR: the learning rate back at 1e-3 at each cycle's start), gradients clipped to norm 1. The shipped
+fit runs cycles of 2,500 steps, each continuing from the shipped weights of the cycles before it
+(``PsfPretrainBudget.first_cycles``, ``benchmark.publish.ship_attacker.ship_known_psf``).
 """
 
 from __future__ import annotations
@@ -75,6 +78,7 @@ class PsfPretrainBudget:
     heldout_lenses: int
     patience_evals: int
     min_gain_db: float
+    cycle_steps: int = 0  # 0: one cosine over max_steps; else cosine cycles of this length (warm restarts)
 
     def __post_init__(self) -> None:
         for name in ("width", "max_steps", "batch_size", "crop_px", "pool_lenses", "images_per_lens",
@@ -83,18 +87,40 @@ class PsfPretrainBudget:
                 raise ValueError(f"PsfPretrainBudget.{name} must be >= 1, got {getattr(self, name)!r}")
         if self.crop_px % 2:
             raise ValueError(f"PsfPretrainBudget.crop_px must be even (keeps the Bayer phase), got {self.crop_px}")
+        if self.cycle_steps and (self.cycle_steps < 0 or self.max_steps % self.cycle_steps
+                                 or self.cycle_steps % self.eval_every):
+            raise ValueError(f"PsfPretrainBudget.cycle_steps={self.cycle_steps} must divide max_steps "
+                             f"({self.max_steps}) and be a multiple of eval_every ({self.eval_every})")
+
+    @property
+    def cycle(self) -> int:
+        """The length of one cosine cycle (the whole budget without warm restarts)."""
+        return self.cycle_steps or self.max_steps
+
+    def first_cycles(self) -> PsfPretrainBudget | None:
+        """The budget of every cycle but the last (what a warm start continues), None with one cycle."""
+        if self.cycle >= self.max_steps:
+            return None
+        steps = self.max_steps - self.cycle
+        return dataclasses.replace(self, max_steps=steps, cycle_steps=0 if steps == self.cycle else self.cycle)
 
     def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        """The fields (``cycle_steps`` only when set: the keys of budgets made before it stay valid)."""
+        d = dataclasses.asdict(self)
+        if not d["cycle_steps"]:
+            del d["cycle_steps"]
+        return d
 
 
 PSF_BUDGETS: dict[str, PsfPretrainBudget] = {
     # The shipped pre-training (quick and paper profiles share it: a convolutional network is
     # size-agnostic and the PSFs are in sensor pixels either way).
+    # Three cosine cycles of 2,500 steps, each shipped (``nafnet-known-psf-full-s0``, ``-full5000-s0``,
+    # ``-full7500-s0``) and continued from by the next.
     "full": PsfPretrainBudget(width=16, enc_blocks=(1, 1, 2), middle_blocks=2, dec_blocks=(1, 1, 1),
-                              max_steps=2500, batch_size=8, crop_px=128, pool_lenses=8, images_per_lens=6,
+                              max_steps=7500, batch_size=8, crop_px=128, pool_lenses=8, images_per_lens=6,
                               refresh_every=20, eval_every=250, heldout_lenses=6, patience_evals=4,
-                              min_gain_db=0.05),
+                              min_gain_db=0.05, cycle_steps=2500),
     # Tiny and smoke runs: seconds, so that the tests exercise the whole path.
     "small": PsfPretrainBudget(width=8, enc_blocks=(1, 1), middle_blocks=1, dec_blocks=(1, 1),
                                max_steps=12, batch_size=2, crop_px=32, pool_lenses=2, images_per_lens=2,
@@ -237,7 +263,8 @@ def _flattened(scores: list[float], patience: int, min_gain: float) -> tuple[boo
 
 def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, seed: int, device: str = "cpu",
              checkpoint: Path | None = None, family: LensFamily | None = None,
-             progress: Callable[[str], None] | None = None) -> tuple[NAFNet, PretrainCurve]:
+             progress: Callable[[str], None] | None = None,
+             warm_start: tuple[dict[str, Tensor], PretrainCurve] | None = None) -> tuple[NAFNet, PretrainCurve]:
     """Pre-train the known-PSF restorer across the lens family (module docs).
 
     Args:
@@ -250,9 +277,16 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
             and plain values, read back with ``weights_only=True``); None keeps nothing.
         family: The lens family (default ``LensFamily()``).
         progress: Called with one line per evaluation (besides the log).
+        warm_start: The weights and curve of this budget's first cycles (``first_cycles``: the same seed,
+            scenes and draws) to continue from at the restart, where no checkpoint exists. The optimiser's
+            moments start afresh there (a fit run through its restart would carry them over).
 
     Returns:
         The network with the kept (best held-out) weights, on the CPU, in eval mode, and its curve.
+
+    With cosine cycles (``cycle_steps``) the stop rule is read at each cycle's end only: the fit stops
+    "flattened" when that cycle's best held-out score is less than ``min_gain_db`` above the best before it
+    (the restart's high learning rate makes the first evaluations of a cycle fall).
     """
     if scenes.ndim != 4 or scenes.shape[0] < 1 or heldout_scenes.ndim != 4 or heldout_scenes.shape[0] < 1:
         raise ValueError(f"pretrain needs (N, 3, H, W) train and held-out scenes, got {tuple(scenes.shape)} "
@@ -260,9 +294,25 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
     family = family or LensFamily()
     model = build_network(budget, seed).to(device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=_LR, betas=_BETAS, weight_decay=_WEIGHT_DECAY)
-    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=budget.max_steps, eta_min=_LR_MIN)
+    schedule: torch.optim.lr_scheduler.LRScheduler = (
+        torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(optimizer, T_0=budget.cycle_steps, eta_min=_LR_MIN)
+        if budget.cycle_steps else
+        torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=budget.max_steps, eta_min=_LR_MIN))
     curve, best_state, start = PretrainCurve(), None, 0
-    if checkpoint is not None and checkpoint.exists():
+    if warm_start is not None and not (checkpoint is not None and checkpoint.exists()):
+        state, before = warm_start
+        start = before.steps[-1] if before.steps else 0
+        if start % budget.cycle or start >= budget.max_steps:
+            raise ValueError(f"a warm start continues at a cycle's end before max_steps ({budget.cycle}-step cycles "
+                             f"of {budget.max_steps}); its curve ends at step {start}")
+        model.load_state_dict(state)
+        best_state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
+        curve = PretrainCurve.from_dict(before.to_dict())
+        curve.stopped, curve.still_rising = "budget", False
+        for _ in range(start):
+            schedule.step()
+        log.info("nafnet-known-psf pre-training continues from step %d (warm restart)", start)
+    elif checkpoint is not None and checkpoint.exists():
         saved = torch.load(checkpoint, weights_only=True)
         model.load_state_dict(saved["model"])
         optimizer.load_state_dict(saved["optimizer"])
@@ -306,7 +356,12 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
             if score >= max(curve.heldout_psnr_db):
                 best_state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
             curve.seconds = time.perf_counter() - t0
-            flat, rising = _flattened(curve.heldout_psnr_db, budget.patience_evals, budget.min_gain_db)
+            if budget.cycle_steps:  # read at a cycle's end only, over that cycle's evaluations
+                per_cycle = budget.cycle_steps // budget.eval_every
+                flat, rising = ((False, curve.still_rising) if (step + 1) % budget.cycle_steps else
+                                _flattened(curve.heldout_psnr_db, per_cycle, budget.min_gain_db))
+            else:
+                flat, rising = _flattened(curve.heldout_psnr_db, budget.patience_evals, budget.min_gain_db)
             curve.still_rising = rising
             line = (f"step {step + 1}/{budget.max_steps}: held-out {score:.2f} dB (Wiener {curve.wiener_psnr_db:.2f} dB), "
                     f"{curve.seconds:.0f} s")

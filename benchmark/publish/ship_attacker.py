@@ -30,7 +30,7 @@ from attacks.readers.learned_reader_psf import family_key
 from attacks.training.reader_family_training import pretrain_family
 from common.plate_render import PLATE_FORMAT
 from attacks.restorers.nafnet_generic import NafnetGeneric
-from attacks.restorers.nafnet_known_psf import PRETRAIN_SEED, SHIPPED_SCENES, NafnetKnownPSF, pack, shipped_key
+from attacks.restorers.nafnet_known_psf import PRETRAIN_SEED, SHIPPED_SCENES, NafnetKnownPSF, pack, shipped_key, unpack
 from attacks.training.psf_restorer_training import PSF_BUDGETS
 from attacks.training.psf_restorer_training import pretrain as pretrain_known_psf
 from attacks.training.restorer_training import collect_pairs, data_identity
@@ -119,20 +119,33 @@ def ship_reader_family(args: argparse.Namespace, reads: str = "sensor") -> int:
 def ship_known_psf(args: argparse.Namespace) -> int:
     """Pre-train ``nafnet-known-psf`` across the lens family on the scenes ``SHIPPED_SCENES`` names and ship
     it with its held-out curve. Resumable: the checkpoint after every evaluation is in the cache
-    (``<cache>/pretrain/nafnet-known-psf-s0.pt``); running the command again continues from it."""
+    (``<cache>/pretrain/nafnet-known-psf-s0-<steps>.pt``); running the command again continues from it. A
+    budget of several cosine cycles continues, at its last restart, from the shipped weights of its first
+    cycles where the package has them (``PsfPretrainBudget.first_cycles``), else trains them too."""
     s = SHIPPED_SCENES
     size = (int(s["size"][0]), int(s["size"][1]))
     train = to_tensor(load_scenes(s["scenes"], s["train_split"], s["n_train"], size, s["scene_seed"]))
     heldout = to_tensor(load_scenes(s["scenes"], s["heldout_split"], s["n_heldout"], size, s["scene_seed"]))
     budget = PSF_BUDGETS["full"]
-    checkpoint = cache_root() / "pretrain" / f"nafnet-known-psf-s{PRETRAIN_SEED}.pt"
-    net, curve = pretrain_known_psf(budget, train, heldout, PRETRAIN_SEED, checkpoint=checkpoint, progress=print)
+    checkpoint = cache_root() / "pretrain" / f"nafnet-known-psf-s{PRETRAIN_SEED}-{budget.max_steps}.pt"
+    previous, warm, start = budget.first_cycles(), None, None
+    if previous is not None and not checkpoint.exists():
+        found = find_shipped(NafnetKnownPSF.name, shipped_key(previous))
+        if found is not None:
+            net, before = unpack(found.data, previous)
+            if before is not None:
+                warm, start = (net.state_dict(), before), found.describe()
+                print(f"continuing from {found.path.name} (step {before.steps[-1]}) at a warm restart")
+    net, curve = pretrain_known_psf(budget, train, heldout, PRETRAIN_SEED, checkpoint=checkpoint, progress=print,
+                                    warm_start=warm)
     made = {"commit": git_commit(), "command": "python -m benchmark pretrain-attacker nafnet-known-psf",
             "seed": PRETRAIN_SEED, "fit_s": round(curve.seconds, 1), "threads": torch.get_num_threads(),
             "packages": package_versions(), "curve": curve.to_dict(),
-            "training_data": data_identity(train), "heldout_data": data_identity(heldout)}
-    path = write_shipped(f"nafnet-known-psf-full-s{PRETRAIN_SEED}", NafnetKnownPSF.name, shipped_key(budget),
-                         pack(net, curve), made, args.out)
+            "training_data": data_identity(train), "heldout_data": data_identity(heldout),
+            **({"warm_start": start} if start is not None else {})}
+    name = f"nafnet-known-psf-full-s{PRETRAIN_SEED}" if previous is None else \
+        f"nafnet-known-psf-full{budget.max_steps}-s{PRETRAIN_SEED}"
+    path = write_shipped(name, NafnetKnownPSF.name, shipped_key(budget), pack(net, curve), made, args.out)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB) and its provenance; held-out PSNR "
           f"{max(curve.heldout_psnr_db):.2f} dB (Wiener alone {curve.wiener_psnr_db:.2f} dB) at step "
           f"{curve.kept_step} of {curve.steps[-1]} ({curve.stopped}{', still rising' if curve.still_rising else ''})")

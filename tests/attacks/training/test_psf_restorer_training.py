@@ -84,3 +84,34 @@ def test_a_bad_budget_names_its_field():
         dataclasses.replace(SMALL, crop_px=33)
     with pytest.raises(ValueError, match="PsfPretrainBudget.max_steps"):
         PsfPretrainBudget(**{**SMALL.to_dict(), "max_steps": 0})
+
+
+def test_cosine_cycles_continue_from_the_first_cycles_weights_at_the_restart(scenes):
+    """A two-cycle budget warm-started from its first cycle's fit: the curve goes on from that fit's
+    (same held-out set, so the first cycle's scores are kept as they were), the learning rate restarts at the
+    cycle's end, the second cycle trains (weights change), and the run is a function of its inputs."""
+    train, heldout = scenes
+    two = dataclasses.replace(SMALL, max_steps=8, cycle_steps=4, patience_evals=99)
+    first_budget = two.first_cycles()
+    assert first_budget is not None and (first_budget.max_steps, first_budget.cycle_steps) == (4, 0)
+    assert "cycle_steps" not in first_budget.to_dict() and two.to_dict()["cycle_steps"] == 4  # old keys stay valid
+    first, first_curve = pretrain(first_budget, train, heldout, 0)
+    runs = [pretrain(two, train, heldout, 0, warm_start=(_state(first), first_curve)) for _ in range(2)]
+    (net, curve), (again, curve_again) = runs
+    assert curve.steps == [4, 8] and curve.heldout_psnr_db[0] == pytest.approx(first_curve.heldout_psnr_db[-1])
+    assert curve.heldout_psnr_db == curve_again.heldout_psnr_db
+    assert all(torch.equal(again.state_dict()[k], v) for k, v in net.state_dict().items())
+    kept_first = curve.kept_step == 4
+    assert kept_first == all(torch.equal(net.state_dict()[k], v) for k, v in first.state_dict().items())
+    with pytest.raises(ValueError, match="cycle's end"):
+        pretrain(two, train, heldout, 0, warm_start=(_state(first), dataclasses.replace(first_curve, steps=[2],
+                                                                                        heldout_psnr_db=[1.0])))
+
+
+def test_with_cycles_the_stop_rule_is_read_at_a_cycles_end_only():
+    with pytest.raises(ValueError, match="cycle_steps=3 must divide max_steps"):
+        dataclasses.replace(SMALL, cycle_steps=3)  # 12 steps, evaluations every 4
+    with pytest.raises(ValueError, match="multiple of eval_every"):
+        dataclasses.replace(SMALL, max_steps=12, cycle_steps=6)
+    assert dataclasses.replace(SMALL, max_steps=24, cycle_steps=12).first_cycles().to_dict() == \
+        dataclasses.replace(SMALL, max_steps=12).to_dict()
