@@ -131,3 +131,19 @@ def test_the_folded_onnx_network_restores_as_the_trained_one(shipped_restorer):
         sensor = lens(sharp, generator=torch.Generator().manual_seed(1))
         direct = net(psf_inputs(sensor, OtfCache(lens.psf()), lens.gain())).clamp(0, 1)
     assert torch.allclose(attacker.restore(sensor), direct, atol=1e-4)
+
+
+def test_each_shipped_cosine_cycle_continues_from_the_weights_shipped_before_it(shipped_restorer):
+    """The shipped pre-training is a chain of cycles: each file names the one it continued from by its
+    sha256, that file is shipped and matches the budget of the cycles before, and its held-out curve is the
+    start of the next file's (the same held-out set, scored once)."""
+    _, curve, shipped = shipped_restorer
+    budget, later = PSF_BUDGETS["full"], shipped
+    while (earlier_budget := budget.first_cycles()) is not None:
+        earlier = find_shipped(NafnetKnownPSF.name, shipped_key(earlier_budget))
+        assert earlier is not None, earlier_budget
+        assert later.provenance["made"]["warm_start"]["sha256"] == earlier.provenance["sha256"]
+        before = earlier.provenance["made"]["curve"]["heldout_psnr_db"]
+        assert later.provenance["made"]["curve"]["heldout_psnr_db"][:len(before)] == before
+        budget, later = earlier_budget, earlier
+    assert "warm_start" not in later.provenance["made"] and budget.cycle == budget.max_steps
