@@ -62,7 +62,8 @@ def code_version() -> str:
 def code_digest(root: Path, memo: Path | None = None) -> str:
     """code_version's digest of the packages under `root`. `memo`: a JSON file of source digests by the
     SHA-256 of their bytes, so that only sources changed since it was written are parsed (parsing every
-    source takes about a second); unreadable, it is rebuilt; written atomically, so runs may share it."""
+    source takes about a second); unreadable, it is rebuilt; written atomically, so runs may share it, and
+    only into a folder that exists."""
     known = _read_memo(memo)
     used: dict[str, str] = {}
     digest = hashlib.sha256(package_versions().encode())
@@ -93,8 +94,10 @@ def _read_memo(memo: Path | None) -> dict[str, str]:
 
 
 def _write_memo(memo: Path, digests: dict[str, str]) -> None:
+    """Write the memo into its folder if that exists (the cache: a dry run creates nothing)."""
+    if not memo.parent.is_dir():
+        return
     try:
-        memo.parent.mkdir(parents=True, exist_ok=True)
         tmp = memo.with_name(f"{memo.name}.{os.getpid()}.tmp")
         tmp.write_text(json.dumps(digests))
         tmp.replace(memo)

@@ -73,6 +73,9 @@ def test_the_source_digest_memo_is_used_and_rebuilt_when_unreadable(tmp_path, mo
     source.parent.mkdir(parents=True)
     source.write_text("x = 1\n")
     memo = tmp_path / "cache" / "code-digests.json"
+    assert provenance.code_digest(tmp_path, memo=memo) == provenance.code_digest(tmp_path)
+    assert not memo.parent.exists()  # no cache folder: none is made (a dry run creates nothing)
+    memo.parent.mkdir()
     base = provenance.code_digest(tmp_path, memo=memo)
     assert provenance.code_digest(tmp_path) == base and memo.exists()
     parsed = []
