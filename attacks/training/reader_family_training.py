@@ -104,14 +104,13 @@ def lens_camera(lens: Any, reads: str = "sensor", device: str = "cpu"
         raise ValueError(f"reads={reads!r}: must be one of {', '.join(READS)}")
     with torch.no_grad():
         psf = lens.psf().detach().cpu()
-        gain = lens.gain().detach().cpu() if reads == "wiener" else None
-    otf = OtfCache(psf) if reads == "wiener" else None
+        wiener = (OtfCache(psf), lens.gain().detach().cpu()) if reads == "wiener" else None
 
     def camera(x: Tensor, generator: torch.Generator) -> Tensor:
         with torch.no_grad():
             sensor = lens(x.to(device), generator=generator if device == "cpu" else None).cpu()
-            return sensor if otf is None or gain is None else psf_inputs(sensor, otf, gain)[:, :3]
-    return camera, psf_radius_px(psf) if otf is None else 0.0, psf.shape[-1] // 2
+            return sensor if wiener is None else psf_inputs(sensor, *wiener)[:, :3]
+    return camera, psf_radius_px(psf) if wiener is None else 0.0, psf.shape[-1] // 2
 
 
 def family_held_out(family: LensFamily, budget: FamilyBudget, fmt: str, seed: int, reads: str = "sensor"

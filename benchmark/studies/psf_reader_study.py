@@ -132,18 +132,20 @@ def measure_lens(name: str, family_weights: Path | None = None, seed: int = 0) -
     def hits(table: dict[str, tuple[int, int]], chosen: list[str]) -> list[int]:
         return [int(table[i][0]) for i in chosen]
 
-    ensemble = {i: (int(any(p[i][0] for p in published.values() if i in p)), ours["learned-reader-psf"][i][1])
-                for i in ids}
-    with_psf = {i: (int(ensemble[i][0] or ours["learned-reader-psf"][i][0]), ensemble[i][1]) for i in ids}
+    def union(added: dict[str, tuple[int, int]] | None = None, left_out: str | None = None) -> dict[str, tuple[int, int]]:
+        """Per plate: read by any published chain but ``left_out``, or by ``added``; with its width."""
+        return {i: (int(bool(added and added[i][0])
+                        or any(p[i][0] for a, p in published.items() if a != left_out and i in p)),
+                    ours["learned-reader-psf"][i][1]) for i in ids}
+
+    ensemble = union()
+    with_psf = union(ours["learned-reader-psf"])
     # The same without the per-lens fine-tuned learned-reader: what it still adds once learned-reader-psf is in.
-    without_tuned = {i: (int(ours["learned-reader-psf"][i][0]
-                             or any(p[i][0] for a, p in published.items() if a != "learned-reader" and i in p)),
-                         ensemble[i][1]) for i in ids}
+    without_tuned = union(ours["learned-reader-psf"], left_out="learned-reader")
     tuned = ours["learned-reader-psf-tuned"]
     # The ensemble with the per-lens fine-tuned reader in place of the zero-shot one, with and without learned-reader.
-    with_tuned = {i: (int(ensemble[i][0] or tuned[i][0]), ensemble[i][1]) for i in ids}
-    tuned_without = {i: (int(tuned[i][0] or any(p[i][0] for a, p in published.items() if a != "learned-reader"
-                                                  and i in p)), ensemble[i][1]) for i in ids}
+    with_tuned = union(tuned)
+    tuned_without = union(tuned, left_out="learned-reader")
     best = max((a for a in published if a != "learned-reader"), key=lambda a: sum(hits(published[a], readable)))
     table = {**ours, "learned-reader": published["learned-reader"],
              f"best published chain ({best})": published[best], "published ensemble": ensemble,
