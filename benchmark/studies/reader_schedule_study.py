@@ -1,0 +1,157 @@
+"""``learned-reader``'s per-lens fine-tune on a shorter schedule, against the published fit, per plate:
+``python -m benchmark.studies.reader_schedule_study [--lens L ...] [--steps N]``.
+
+The published quick fits run a cosine schedule over 2,400 steps and never stop before step 1,200
+(``BUDGETS["quick"]``): 260-310 s a lens on 2 cores, most of a lens's per-lens fit time. A one-cycle
+schedule anneals to zero at its own end, so a shorter cycle may reach the same reader in a fraction of
+the steps. Per lens (the published quick entry's lens, seed 0), this study fits the reader from the same
+sharp start on the candidate budget (``candidate``: the quick budget with ``max_steps`` = ``--steps``,
+every evaluation run, no early stop) and reads the entry's own plates with it (the run's plate set rebuilt;
+ids checked), then pairs per plate, from 32 px (paired bootstrap, 95 %):
+
+- the candidate against the published ``learned-reader`` row (the long fit);
+- the ensemble a run now has on those plates (the published chains, ``learned-reader-psf`` zero-shot)
+  with the candidate in place of the long fit, against the same with the long fit.
+
+Writes ``leaderboard/studies/reader_schedule.json`` (merged per lens): the candidate budget, each fit's
+held-out curve and seconds, per-bin accuracies and the paired differences, load average, commit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from attacks.base import AttackBudget, FitContext
+from attacks.readers.learned_reader import BUDGETS, LearnedReader
+from attacks.readers.learned_reader_psf import LearnedReaderPSF
+from attacks.training.plate_reader_training import ReaderBudget
+from benchmark.runner.config import RunConfig
+from benchmark.runner.evaluation import read_plates
+from benchmark.runner.rows import plate_units
+from benchmark.runner.tasks import plate_set
+from benchmark.store.profiles import get_profile
+from benchmark.store.provenance import git_commit, package_versions
+from benchmark.studies.psf_reader_study import ENTRIES, FROM_PX, LENSES, _bins, _compare, _entry_outcomes
+from lenses.lens import Lens
+from lenses.spec import parse_spec
+
+__all__ = ["candidate", "main", "measure_lens"]
+
+ROOT = Path(__file__).resolve().parents[2]
+OUT = ROOT / "leaderboard" / "studies" / "reader_schedule.json"
+
+
+def candidate(steps: int) -> ReaderBudget:
+    """The quick fine-tune on a ``steps``-step schedule, evaluated every sixth of it, run to its end."""
+    every = max(1, steps // 6)
+    return dataclasses.replace(BUDGETS["quick"], max_steps=steps, eval_every=every, min_steps=steps)
+
+
+class _Scheduled(LearnedReader):
+    """``learned-reader`` with the candidate's fine-tune budget (and no shipped or cached fit)."""
+
+    def __init__(self, budget: ReaderBudget) -> None:
+        super().__init__(use_shipped_fit=False)
+        self._budget = budget
+
+    def fine_tune_budget(self, profile: str) -> ReaderBudget:
+        return self._budget
+
+
+def measure_lens(name: str, budget: ReaderBudget, seed: int = 0) -> dict[str, Any]:
+    """The study's record for one lens (module docs)."""
+    entry = json.loads((ENTRIES / f"{name}__quick__synthetic.json").read_text())
+    profile = get_profile("quick")
+    lens = Lens(parse_spec(entry["lens_spec"], f"{name} entry"))
+    cfg = RunConfig(lenses=[name], attacks=[], scenes="synthetic", profile=profile, seeds=[seed])
+    with torch.no_grad():
+        plates = plate_set(cfg, seed, lens)
+    assert plates is not None, "the quick profile reads plate windows"
+    ours: dict[str, dict[str, tuple[int, int]]] = {}
+    record: dict[str, Any] = {"lens_spec": entry["lens_spec"]}
+    for label, reader in (("candidate", _Scheduled(budget)), ("learned-reader-psf", LearnedReaderPSF())):
+        t0 = time.perf_counter()
+        reader.fit(FitContext(lens=lens, budget=AttackBudget(profile="quick")))
+        fit_s = time.perf_counter() - t0
+        if label == "candidate" and reader.curve is not None:
+            record["fit"] = {"fit_s": round(fit_s, 1), "steps": reader.curve.steps,
+                             "held_out": [round(a, 4) for a in reader.curve.accuracy],
+                             "kept_step": reader.curve.best_step, "stopped": reader.curve.stopped}
+        outcomes, _, _ = read_plates(reader, plates.sensor, plates.scenes, profile.batch_size, "cpu")
+        units = plate_units(outcomes)
+        ours[label] = dict(zip((units.prefix + i for i in units.ids),
+                               zip(units.values["correct"], units.values["width_px"])))
+    published = _entry_outcomes(entry, seed)
+    ids = sorted(ours["candidate"])
+    if set(ids) != set(published["learned-reader"]):
+        return {**record, "paired": False, "mismatch": {"ours": len(ids), "published": len(published["learned-reader"])}}
+    widths = [ours["candidate"][i][1] for i in ids]
+    readable = [i for i in ids if ours["candidate"][i][1] >= FROM_PX]
+
+    def union(reader: dict[str, tuple[int, int]]) -> list[int]:
+        """Per plate: read by a published chain other than learned-reader, by learned-reader-psf or by ``reader``."""
+        return [int(bool(reader[i][0] or ours["learned-reader-psf"][i][0]
+                         or any(p[i][0] for a, p in published.items() if a != "learned-reader" and i in p)))
+                for i in ids]
+
+    def pick(values: list[int]) -> list[int]:
+        return [v for v, i in zip(values, ids) if ours["candidate"][i][1] >= FROM_PX]
+
+    long_fit = [int(published["learned-reader"][i][0]) for i in ids]
+    short_fit = [int(ours["candidate"][i][0]) for i in ids]
+    with_long, with_short = union(published["learned-reader"]), union(ours["candidate"])
+    record.update({
+        "paired": True, "n_plates": len(ids), "n_from_32px": len(readable),
+        "readers": {label: {"bins": _bins(values, widths), f"from_{FROM_PX}px": round(float(np.mean(pick(values))), 4)}
+                    for label, values in (("candidate", short_fit), ("learned-reader (published fit)", long_fit),
+                                          ("ensemble with the candidate", with_short),
+                                          ("ensemble with the published fit", with_long))},
+        "paired_from_32px": {"candidate - published fit": _compare(pick(short_fit), pick(long_fit)),
+                             "ensemble: candidate - published fit": _compare(pick(with_short), pick(with_long))},
+    })
+    return record
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--lens", action="append", default=None, help="lens (repeatable; default: %s)" % ", ".join(LENSES))
+    parser.add_argument("--steps", type=int, default=600, help="the candidate schedule's steps (default 600)")
+    parser.add_argument("--out", type=Path, default=OUT)
+    args = parser.parse_args(argv)
+    budget = candidate(args.steps)
+    study: dict[str, Any] = json.loads(args.out.read_text()) if args.out.exists() else {}
+    study.update({"commit": git_commit(), "packages": package_versions(), "threads": torch.get_num_threads(),
+                  "seed": 0, "pooled_from_px": FROM_PX, "published_budget": BUDGETS["quick"].to_dict(),
+                  "command": "python -m benchmark.studies.reader_schedule_study " + " ".join(sys.argv[1:] if argv is None else argv)})
+    study.setdefault("lenses", {})
+    for name in args.lens or list(LENSES):
+        t0 = time.perf_counter()
+        record = measure_lens(name, budget)
+        record.update({"budget": budget.to_dict(), "seconds": round(time.perf_counter() - t0, 1),
+                       "load_average": [round(x, 2) for x in os.getloadavg()]})
+        study["lenses"][name] = record
+        if record["paired"]:
+            c = record["paired_from_32px"]
+            print(f"{name}: fit {record['fit']['fit_s']} s; candidate - published fit "
+                  f"{c['candidate - published fit']['difference_pt']:+.1f} pt "
+                  f"[{c['candidate - published fit']['low_pt']:+.1f}, {c['candidate - published fit']['high_pt']:+.1f}]; "
+                  f"in the ensemble {c['ensemble: candidate - published fit']['difference_pt']:+.1f} pt", flush=True)
+        else:
+            print(f"{name}: plate ids do not match the entry's; not paired", flush=True)
+        args.out.write_text(json.dumps(study, indent=1) + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
