@@ -31,7 +31,9 @@ import numpy as np
 from benchmark.results import stats
 from benchmark.results.attack_gap import attack_gaps, gap_curves
 from benchmark.results.ensemble import plate_ensemble, seed_plates, seed_scene_names, seed_scenes
-from benchmark.results.entries import entry_name, read_entry
+from benchmark.results.ensemble_choice import (
+    ChainEffect, ensemble_values, proposed_ensemble, removal_effects, strongest_restorer)
+from benchmark.results.entries import Entry, entry_name, read_entry
 from benchmark.results.plate_scoring import WIDTH_BINS_PX
 from benchmark.results.schema import Results, Row
 from benchmark.store.provenance import git_commit
@@ -42,6 +44,7 @@ ROOT = Path(__file__).resolve().parents[2]
 LEADERBOARD = ROOT / "leaderboard"
 OUT = LEADERBOARD / "studies" / "run_pairing.json"
 FROM_PX = 32
+PRIVACY_LENSES = ("ideal", "defocus", "gp", "os", "os-d-1000")  # the lenses the ensemble is chosen on
 SECONDS = ("fit_s", "cascade_s")  # what a row measures of its own attacker's cost
 
 
@@ -103,6 +106,16 @@ def _scenes(run_rows: list[Row], entry_rows: list[Row], seed: int) -> dict[str, 
             "run_restorers_db": {r: round(float(v), 3) for r, v in zip(ours[0], ours[1].mean(axis=0))}}
 
 
+def chain_effects(rows: list[Row], lens: str) -> dict[str, dict[str, Any]]:
+    """Per chain of the run's rows of one lens and seed: what it decides and its removal effect
+    (``benchmark.results.ensemble_choice``), and whether the rule keeps it for this lens (``matters``)."""
+    run = Entry(lens=lens, profile="quick", scenes="synthetic", seeds=sorted({r.seed for r in rows}), profile_values={},
+                coefficients_um=None, lens_spec=None, rows=rows)
+    return {e.attack: {"kind": e.kind, "first": e.first, "only": e.only, "best_scenes": e.best_scenes,
+                       "plate_points": round(e.plate_points, 3), "psnr_db": round(e.psnr_db, 4), "matters": e.matters}
+            for e in removal_effects([run])}
+
+
 def pair_lens(run_rows: list[Row], lens: str, seed: int, study: dict[str, Any] | None) -> dict[str, Any]:
     """The study's record of `lens` (module docs)."""
     entry = read_entry(LEADERBOARD / "entries" / entry_name(lens, "quick", "synthetic"))
@@ -110,40 +123,76 @@ def pair_lens(run_rows: list[Row], lens: str, seed: int, study: dict[str, Any] |
     theirs = [r for r in entry.rows if r.seed == seed]
     return {"plates": _plates(ours, theirs, seed, study, lens, entry.lens_spec),
             "scenes": _scenes(ours, theirs, seed),
+            "chain_effects": chain_effects(ours, lens),
+            "run_provenance": sorted({f"{r.provenance.get('git_commit', '?')[:12]} {str(r.provenance.get('date', '?'))[:10]}"
+                                      for r in ours if r.provenance}),
             "seconds": {r.attack: {k: round(float(v), 1) for k, v in r.metrics.items() if k in SECONDS}
                         for r in ours if r.ok and any(k in r.metrics for k in SECONDS)}}
 
 
+def proposal(record: dict[str, Any], runs: dict[str, list[Row]]) -> dict[str, Any]:
+    """The rule of ``benchmark.results.ensemble_choice`` applied to the fresh runs' chain effects of the
+    privacy lenses (``PRIVACY_LENSES``, as far as the record holds them): the chains it keeps plus the paper's
+    ``lpdr`` on the sensor image and after the strongest restorer; and, per lens whose run rows are at hand,
+    what dropping every other chain together costs the run's ensemble (plates from every width, points;
+    PSNR, dB), so that chains that each decide nothing alone do not hide a plate they read only together."""
+    lenses = [lens for lens in PRIVACY_LENSES if "chain_effects" in record["lenses"].get(lens, {})]
+    effects = [ChainEffect(lens, "quick", "synthetic", chain, e["kind"], e["first"], e["only"], e["best_scenes"],
+                           e["plate_points"], e["psnr_db"])
+               for lens in lenses for chain, e in record["lenses"][lens]["chain_effects"].items()]
+    chains = proposed_ensemble(effects)
+    joint = {}
+    for lens, rows in runs.items():
+        if lens not in lenses:
+            continue
+        run = Entry(lens=lens, profile="quick", scenes="synthetic", seeds=sorted({r.seed for r in rows}),
+                    profile_values={}, coefficients_um=None, lens_spec=None, rows=rows)
+        (plates_all, psnr_all), (plates_kept, psnr_kept) = ensemble_values(run), ensemble_values(run, set(chains))
+        joint[lens] = {"plate_points": None if plates_all is None else round(plates_all - (plates_kept or 0.0), 3),
+                       "psnr_db": None if psnr_all is None else round(psnr_all - (psnr_kept or 0.0), 4)}
+    return {"lenses": lenses, "strongest_restorer": strongest_restorer(effects), "chains": list(chains),
+            "dropped": sorted({e.attack for e in effects} - set(chains)), "joint_removal": joint}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--run", type=Path, required=True, help="a run's folder (its results.json)")
-    parser.add_argument("--lens", action="append", default=None, help="lens (repeatable; default: every lens of the run)")
+    parser.add_argument("--run", type=Path, action="append", required=True,
+                        help="a run's folder (its results.json); repeatable")
+    parser.add_argument("--lens", action="append", default=None, help="lens (repeatable; default: every lens of the runs)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args(argv)
-    results = Results.from_json(json.loads((args.run / "results.json").read_text()))
     study_path = LEADERBOARD / "studies" / "ideal_observer.json"
     observer = json.loads(study_path.read_text()) if study_path.exists() else None
     record: dict[str, Any] = json.loads(args.out.read_text()) if args.out.exists() else {}
     record.update({"commit": git_commit(), "seed": args.seed, "load_average_at_study": [round(x, 2) for x in os.getloadavg()],
                    "pooled_from_px": FROM_PX})
     record.setdefault("lenses", {})
-    for lens in args.lens or sorted({r.lens for r in results.rows}):
-        if not (LEADERBOARD / "entries" / entry_name(lens, "quick", "synthetic")).exists():
-            print(f"{lens}: no published quick entry; skipped")
-            continue
-        pairing = pair_lens(results.rows, lens, args.seed, observer)
-        pairing["run"] = {"folder": str(args.run), "command": results.meta.get("command"),
-                          "wall_s": results.meta.get("wall_s")}
-        record["lenses"][lens] = pairing
-        p, s = pairing["plates"], pairing["scenes"]
-        line = f"{lens}: "
-        if p["paired"]:
-            c = p[f"from_{FROM_PX}px"]
-            line += f"plates from {FROM_PX} px {100 * c['entry']:.1f} -> {100 * c['run']:.1f} % ({c['run - entry']['verdict']})"
-        if s["paired"]:
-            line += f"; ensemble PSNR {s['entry_db']:.2f} -> {s['run_db']:.2f} dB ({s['run - entry']['verdict']})"
-        print(line)
+    runs: dict[str, list[Row]] = {}
+    for folder in args.run:
+        results = Results.from_json(json.loads((folder / "results.json").read_text()))
+        for lens in args.lens or sorted({r.lens for r in results.rows}):
+            if not (LEADERBOARD / "entries" / entry_name(lens, "quick", "synthetic")).exists():
+                print(f"{lens}: no published quick entry; skipped")
+                continue
+            if lens in runs and lens not in PRIVACY_LENSES:
+                continue  # a reference lens (sharp) every run holds: the first run's
+            runs[lens] = [r for r in results.rows if r.lens == lens and r.seed == args.seed]
+            pairing = pair_lens(results.rows, lens, args.seed, observer)
+            pairing["run"] = {"folder": str(folder), "command": results.meta.get("command"),
+                              "wall_s": results.meta.get("wall_s")}
+            record["lenses"][lens] = pairing
+            p, s = pairing["plates"], pairing["scenes"]
+            line = f"{lens}: "
+            if p["paired"]:
+                c = p[f"from_{FROM_PX}px"]
+                line += f"plates from {FROM_PX} px {100 * c['entry']:.1f} -> {100 * c['run']:.1f} % ({c['run - entry']['verdict']})"
+            if s["paired"]:
+                line += f"; ensemble PSNR {s['entry_db']:.2f} -> {s['run_db']:.2f} dB ({s['run - entry']['verdict']})"
+            print(line)
+    record["proposal"] = proposal(record, runs)
+    print(f"the rule on the runs of {', '.join(record['proposal']['lenses'])}: keeps {', '.join(record['proposal']['chains'])}; "
+          f"drops {', '.join(record['proposal']['dropped'])}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(record, indent=1, default=float) + "\n")
     print(f"wrote {args.out}")

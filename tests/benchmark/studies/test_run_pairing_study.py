@@ -40,3 +40,21 @@ def test_a_run_with_other_plates_is_reported_not_paired():
                if r.units is not None and r.units.unit == "plate" else r for r in rows]
     record = pair_lens(renamed, "gp", 0, None)
     assert not record["plates"]["paired"] and record["plates"]["why"] == "plate ids differ"
+
+
+def test_the_proposal_keeps_what_matters_and_drops_jointly_no_less_than_alone():
+    gp = entry("gp")
+    rows = [r for r in gp.rows if r.seed == 0]
+    record = {"lenses": {"gp": pair_lens(gp.rows, "gp", 0, None)}}
+    effects = record["lenses"]["gp"]["chain_effects"]
+    found = run_pairing_study.proposal(record, {"gp": rows})
+    assert found["lenses"] == ["gp"]
+    kept, dropped = set(found["chains"]), set(found["dropped"])
+    assert not kept & dropped and kept | dropped >= set(effects)
+    assert {c for c, e in effects.items() if e["matters"]} <= kept and "lpdr" in kept
+    assert f"{found['strongest_restorer']}>lpdr" in kept
+    assert all(not effects[c]["matters"] for c in dropped)
+    # Dropping every other chain together loses at least what dropping any one of them alone loses.
+    joint = found["joint_removal"]["gp"]
+    assert joint["plate_points"] >= max(effects[c]["plate_points"] for c in dropped) - 1e-9
+    assert joint["psnr_db"] >= max(effects[c]["psnr_db"] for c in dropped) - 1e-9
