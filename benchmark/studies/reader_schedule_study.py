@@ -5,15 +5,15 @@ The published quick fits run a cosine schedule over 2,400 steps and never stop b
 (``BUDGETS["quick"]``): 260-310 s a lens on 2 cores, most of a lens's per-lens fit time. A one-cycle
 schedule anneals to zero at its own end, so a shorter cycle may reach the same reader in a fraction of
 the steps. Per lens (the published quick entry's lens, seed 0), this study fits the reader from the same
-sharp start on the candidate budget (``candidate``: the quick budget with ``max_steps`` = ``--steps``,
-every evaluation run, no early stop) and reads the entry's own plates with it (the run's plate set rebuilt;
+sharp start on a candidate budget (``candidate``: the quick budget with ``max_steps`` = ``--steps`` and
+``lr`` = ``--lr``, every evaluation run, no early stop) and reads the entry's own plates with it (the run's plate set rebuilt;
 ids checked), then pairs per plate, from 32 px (paired bootstrap, 95 %):
 
 - the candidate against the published ``learned-reader`` row (the long fit);
 - the ensemble a run now has on those plates (the published chains, ``learned-reader-psf`` zero-shot)
   with the candidate in place of the long fit, against the same with the long fit.
 
-Writes ``leaderboard/studies/reader_schedule.json`` (merged per lens): the candidate budget, each fit's
+Writes ``leaderboard/studies/reader_schedule.json`` (merged per lens and candidate): the candidate budget, each fit's
 held-out curve and seconds, per-bin accuracies and the paired differences, load average, commit.
 """
 
@@ -45,16 +45,22 @@ from benchmark.studies.psf_reader_study import ENTRIES, FROM_PX, LENSES, _bins, 
 from lenses.lens import Lens
 from lenses.spec import parse_spec
 
-__all__ = ["candidate", "main", "measure_lens"]
+__all__ = ["candidate", "label", "main", "measure_lens", "published_fit"]
 
 ROOT = Path(__file__).resolve().parents[2]
 OUT = ROOT / "leaderboard" / "studies" / "reader_schedule.json"
 
 
-def candidate(steps: int) -> ReaderBudget:
-    """The quick fine-tune on a ``steps``-step schedule, evaluated every sixth of it, run to its end."""
+def candidate(steps: int, lr: float) -> ReaderBudget:
+    """The quick fine-tune on a ``steps``-step schedule peaking at ``lr``, evaluated every sixth of it, run
+    to its end."""
     every = max(1, steps // 6)
-    return dataclasses.replace(BUDGETS["quick"], max_steps=steps, eval_every=every, min_steps=steps)
+    return dataclasses.replace(BUDGETS["quick"], max_steps=steps, lr=lr, eval_every=every, min_steps=steps)
+
+
+def label(budget: ReaderBudget) -> str:
+    """The key a candidate's records are kept under."""
+    return f"{budget.max_steps} steps, lr {budget.lr:g}"
 
 
 class _Scheduled(LearnedReader):
@@ -68,6 +74,12 @@ class _Scheduled(LearnedReader):
         return self._budget
 
 
+def published_fit(entry: dict[str, Any], seed: int = 0) -> dict[str, Any]:
+    """How the entry's ``learned-reader`` fit of ``seed`` ended (its row's notes) and when it was run."""
+    row = next(r for r in entry["rows"] if r["attack"] == "learned-reader" and r["seed"] == seed)
+    return {**{k: v for k, v in row["notes"].items() if k.startswith("fit_")}, "date": row["provenance"].get("date")}
+
+
 def measure_lens(name: str, budget: ReaderBudget, seed: int = 0) -> dict[str, Any]:
     """The study's record for one lens (module docs)."""
     entry = json.loads((ENTRIES / f"{name}__quick__synthetic.json").read_text())
@@ -78,7 +90,7 @@ def measure_lens(name: str, budget: ReaderBudget, seed: int = 0) -> dict[str, An
         plates = plate_set(cfg, seed, lens)
     assert plates is not None, "the quick profile reads plate windows"
     ours: dict[str, dict[str, tuple[int, int]]] = {}
-    record: dict[str, Any] = {"lens_spec": entry["lens_spec"]}
+    record: dict[str, Any] = {"lens_spec": entry["lens_spec"], "published_fit": published_fit(entry, seed)}
     for label, reader in (("candidate", _Scheduled(budget)), ("learned-reader-psf", LearnedReaderPSF())):
         t0 = time.perf_counter()
         reader.fit(FitContext(lens=lens, budget=AttackBudget(profile="quick")))
@@ -126,23 +138,24 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--lens", action="append", default=None, help="lens (repeatable; default: %s)" % ", ".join(LENSES))
     parser.add_argument("--steps", type=int, default=600, help="the candidate schedule's steps (default 600)")
+    parser.add_argument("--lr", type=float, default=BUDGETS["quick"].lr, help="its peak learning rate")
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args(argv)
-    budget = candidate(args.steps)
+    budget = candidate(args.steps, args.lr)
     study: dict[str, Any] = json.loads(args.out.read_text()) if args.out.exists() else {}
     study.update({"commit": git_commit(), "packages": package_versions(), "threads": torch.get_num_threads(),
-                  "seed": 0, "pooled_from_px": FROM_PX, "published_budget": BUDGETS["quick"].to_dict(),
+                  "seed": 0, "pooled_from_px": FROM_PX,
                   "command": "python -m benchmark.studies.reader_schedule_study " + " ".join(sys.argv[1:] if argv is None else argv)})
     study.setdefault("lenses", {})
     for name in args.lens or list(LENSES):
         t0 = time.perf_counter()
         record = measure_lens(name, budget)
-        record.update({"budget": budget.to_dict(), "seconds": round(time.perf_counter() - t0, 1),
+        record.update({"budget": budget.to_dict(), "quick_budget_at_study": BUDGETS["quick"].to_dict(), "seconds": round(time.perf_counter() - t0, 1),
                        "load_average": [round(x, 2) for x in os.getloadavg()]})
-        study["lenses"][name] = record
+        study["lenses"].setdefault(name, {})[label(budget)] = record
         if record["paired"]:
             c = record["paired_from_32px"]
-            print(f"{name}: fit {record['fit']['fit_s']} s; candidate - published fit "
+            print(f"{name}, {label(budget)}: fit {record['fit']['fit_s']} s; candidate - published fit "
                   f"{c['candidate - published fit']['difference_pt']:+.1f} pt "
                   f"[{c['candidate - published fit']['low_pt']:+.1f}, {c['candidate - published fit']['high_pt']:+.1f}]; "
                   f"in the ensemble {c['ensemble: candidate - published fit']['difference_pt']:+.1f} pt", flush=True)
