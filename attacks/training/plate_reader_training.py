@@ -16,9 +16,10 @@ Every ``eval_every`` steps the reader is scored on a fixed held-out set (plates 
 of ``EVAL_WIDTHS_PX`` that fits the range, the true box, no jitter); training stops
 when the mean exact-plate accuracy over the bins has not risen by ``min_gain`` over the last
 ``patience`` evaluations (it has flattened), never before ``min_steps``, or at the budget's last step.
-The floor is there because the mean is diluted and noisy where a blurring lens leaves most bins at 0:
-on defocus (quick) the fit stopped as flattened at step 400 with 128 px plates read 9 %, where a
-2400-step fit read 41-50 % from step 1600 (held-out mean 0.05 at 400, 0.08-0.11 from 1600). A fit stopped by the
+The mean is diluted and noisy where a blurring lens leaves most bins at 0 (seven of ten on defocus), so a
+long schedule with a floor (``min_steps``) reads more there alone; the quick per-lens budget runs one
+short cycle instead, because next to ``learned-reader-psf`` that reader adds nothing the studies can tell on
+the blurring lenses (``benchmark.studies.reader_schedule_study``). A fit stopped by the
 budget while its last ``patience`` evaluations still gained ``min_gain`` is flagged
 ``still_rising``: a privacy figure from it is an upper bound on what a longer fit would leave.
 

@@ -41,7 +41,7 @@ from torch import Tensor, nn
 from tqdm.auto import tqdm
 
 from attacks.networks.plate_cnn import PlateCNN
-from attacks.readers.plates.plate_sim import PlateBatch, psf_radius_px
+from attacks.readers.plates.plate_sim import PlateBatch, psf_radius_px, psf_support_px
 from attacks.training.lens_family import FamilyLens, LensFamily
 from attacks.training.plate_reader_training import (
     FitCurve, ReaderBudget, flattened, held_out_gain, held_out_set, optimiser, plate_accuracy, slot_loss, training_batch)
@@ -93,13 +93,15 @@ def family_camera(family: LensFamily, drawn: FamilyLens, reads: str = "sensor") 
     return FamilyCamera(drawn, camera, spread_px, half)
 
 
-def lens_camera(lens: Any, reads: str = "sensor", device: str = "cpu"
+def lens_camera(lens: Any, reads: str = "sensor", device: str = "cpu", support_energy: float | None = None
                 ) -> tuple[Callable[[Tensor, torch.Generator], Tensor], float, int]:
     """``(camera, spread_px, psf_half_px)`` of one lens (``lenses.Lens``, or anything with ``psf()``,
     ``gain()`` and ``lens(x, generator=g)``): its camera gives the sensor image of plates, or with
     ``reads="wiener"`` their Wiener estimate (module docs); ``spread_px`` is the margin a crop holds for
-    the blur (none for a Wiener estimate). The noise comes from a CPU generator whatever ``device``, and the
-    camera returns CPU tensors, so a fit is the same on every device."""
+    the blur (none for a Wiener estimate); ``psf_half_px`` how far beyond a crop its patch reaches: half the PSF's
+    support, or with ``support_energy`` the radius holding that much of its light (``psf_support_px``). The
+    noise comes from a CPU generator whatever ``device``, and the camera returns CPU tensors, so a fit is
+    the same on every device."""
     if reads not in READS:
         raise ValueError(f"reads={reads!r}: must be one of {', '.join(READS)}")
     with torch.no_grad():
@@ -110,7 +112,8 @@ def lens_camera(lens: Any, reads: str = "sensor", device: str = "cpu"
         with torch.no_grad():
             sensor = lens(x.to(device), generator=generator if device == "cpu" else None).cpu()
             return sensor if wiener is None else psf_inputs(sensor, *wiener)[:, :3]
-    return camera, psf_radius_px(psf) if wiener is None else 0.0, psf.shape[-1] // 2
+    half = psf.shape[-1] // 2 if support_energy is None else psf_support_px(psf, support_energy)
+    return camera, psf_radius_px(psf) if wiener is None else 0.0, half
 
 
 def family_held_out(family: LensFamily, budget: FamilyBudget, fmt: str, seed: int, reads: str = "sensor"

@@ -31,7 +31,7 @@ from torchvision.ops import roi_align
 
 from common.plate_render import PLATE_SIZE_M, format_alphabets, random_plate_text, render_plate
 
-__all__ = ["CROP_HW", "PlateBatch", "crop_margin_px", "plate_crops", "psf_radius_px", "simulate_plates"]
+__all__ = ["CROP_HW", "PlateBatch", "crop_margin_px", "plate_crops", "psf_radius_px", "psf_support_px", "simulate_plates"]
 
 CROP_HW: tuple[int, int] = (24, 96)
 """The reader's input (height, width) in pixels: 96 columns give a 7-character plate 13 px per glyph."""
@@ -70,6 +70,26 @@ def psf_radius_px(psf: Tensor, energy: float = 0.8) -> float:
         cumulative = torch.cumsum(w.flatten()[order], 0)
         radii.append(float(r[order][int(torch.searchsorted(cumulative, torch.tensor(energy, dtype=torch.float64)))]))
     return float(np.mean(radii))
+
+
+def psf_support_px(psf: Tensor, energy: float = 0.995) -> int:
+    """Radius (whole pixels) around the PSF array's centre, the point a scene point maps to, inside which
+    every colour holds at least ``energy`` of its light; at most half the support. How far beyond a crop
+    the light that reaches it comes from: a plate patch simulated with this margin (``simulate_plates``'
+    ``psf_half_px``) misses at most ``1 - energy`` of the surround's light at the crop, where the full
+    support of a co-designed PSF (87 px) makes the patch, and its transform, up to a third larger.
+    ``psf`` (3, K, K), each channel summing to 1, K odd."""
+    k = psf.shape[-1]
+    c = k // 2
+    y, x = torch.meshgrid(torch.arange(k, dtype=torch.float64), torch.arange(k, dtype=torch.float64), indexing="ij")
+    r = torch.maximum((y - c).abs(), (x - c).abs()).flatten()  # the square rings a square patch margin adds
+    order = torch.argsort(r, stable=True)
+    radius = 0
+    for channel in psf.detach().to(torch.float64):
+        cumulative = torch.cumsum((channel / channel.sum()).flatten()[order], 0)
+        inside = int(torch.searchsorted(cumulative, torch.tensor(energy - 1e-12, dtype=torch.float64)))
+        radius = max(radius, int(r[order][min(inside, r.numel() - 1)]))
+    return min(radius, c)
 
 
 def crop_margin_px(box_wh: tuple[float, float], spread_px: float) -> tuple[float, float]:
@@ -141,8 +161,8 @@ def simulate_plates(camera: Callable[[Tensor, torch.Generator], Tensor] | None, 
         rng, generator: The scene draws and the camera's noise; the same pair gives the same batch.
         spread_px: The PSF's spread (``psf_radius_px``) the crop margin holds.
         fmt: Plate format (e.g. 'LLDDDLL').
-        psf_half_px: Half the PSF's support: the patch extends this far beyond every crop, so the
-            light that reaches the crop from outside it is simulated.
+        psf_half_px: How far the PSF spreads light (half its support, or ``psf_support_px``): the patch
+            extends this far beyond every crop, so the light that reaches the crop from outside it is simulated.
         jitter: Move and scale the box as a detector's would (training); False: the true box.
     """
     alphabets = format_alphabets(fmt)

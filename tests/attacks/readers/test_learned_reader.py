@@ -16,7 +16,8 @@ import attacks.training.plate_reader_training as reader_training
 from attacks.training.plate_reader_training import (FitCurve, ReaderBudget, flattened, held_out_gain, plate_accuracy, train_reader,
                                          training_batch, width_bands)
 from common.plate_render import PLATE_FORMAT
-from attacks.readers.plates.plate_sim import CROP_HW, crop_margin_px, plate_crops, psf_radius_px, simulate_plates
+from attacks.readers.plates.plate_sim import (CROP_HW, crop_margin_px, plate_crops, psf_radius_px, psf_support_px,
+                                             simulate_plates)
 from attacks.training.shipped_weights import find_shipped
 
 
@@ -39,6 +40,26 @@ def test_psf_radius_of_a_gaussian_is_the_rayleigh_quantile(make_gaussian_psf):
     psf = make_gaussian_psf(sigma, 20, torch.float64)
     for energy in (0.5, 0.8):
         assert psf_radius_px(psf, energy) == pytest.approx(sigma * math.sqrt(-2 * math.log(1 - energy)), abs=0.35)
+
+
+def test_psf_support_is_the_square_ring_that_holds_the_light_around_the_centre():
+    k = 21
+    delta = torch.zeros(3, k, k, dtype=torch.float64)
+    delta[:, k // 2, k // 2] = 1.0
+    assert psf_support_px(delta) == 0
+    # A uniform square of half-width 4: 0.995 of its light is inside ring 4, not inside ring 3 (49/81).
+    box = torch.zeros(3, k, k, dtype=torch.float64)
+    box[:, k // 2 - 4:k // 2 + 5, k // 2 - 4:k // 2 + 5] = 1.0 / 81
+    assert psf_support_px(box) == 4 and psf_support_px(box, 0.5) == 3
+    # Light moved off the centre (a tilt) counts by how far it went, in the colour that moved furthest.
+    shifted = delta.clone()
+    shifted[2] = 0.0
+    shifted[2, k // 2 + 3, k // 2 - 7] = 1.0
+    assert psf_support_px(shifted) == 7
+    # Never beyond half the support, even where light sits in the corner.
+    corner = torch.zeros(3, k, k, dtype=torch.float64)
+    corner[:, 0, 0] = 1.0
+    assert psf_support_px(corner) == k // 2
 
 
 def test_crop_of_a_box_the_size_of_the_input_is_the_region_itself():
