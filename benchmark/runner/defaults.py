@@ -4,8 +4,9 @@
 published quick entries (docs/ensemble.md, written by ``python -m benchmark.studies.ensemble_choice_study``;
 tests/benchmark/results/test_ensemble_choice.py recomputes it, so it cannot drift from the entries).
 ``MEASURED_ADDITIONS`` (restorers) and ``MEASURED_READERS`` are attackers newer than those entries, added on
-measurement until the next choice re-runs the rule on entries that hold them. ``STANDARD_ENSEMBLE`` is what a run measures unless
-told otherwise (``benchmark.runner.runner.standard_attackers``).
+measurement; fresh runs of the five privacy lenses with all of them and the cascade gave the rule its next
+choice, ``RUN_PROPOSAL``. ``STANDARD_ENSEMBLE`` (that choice and the ``raw`` reference) is what a run
+measures unless told otherwise (``benchmark.runner.runner.standard_attackers``).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from __future__ import annotations
 from benchmark.results.schema import CASCADE_PREFIX, cascade_name
 
 __all__ = ["CASCADE", "CASCADE_PREFIX", "LEARNED_READER", "MEASURED_ADDITIONS", "MEASURED_READERS",
-           "PROPOSED_ENSEMBLE", "STANDARD_ENSEMBLE", "chain_parts"]
+           "PROPOSED_ENSEMBLE", "RUN_PROPOSAL", "STANDARD_ENSEMBLE", "chain_parts"]
 
 # What the rule selects on the published quick entries (see the module docstring and DOCS); the test
 # recomputes it from leaderboard/entries/*quick*.json.
@@ -32,14 +33,19 @@ MEASURED_ADDITIONS: tuple[str, ...] = ("nafnet-known-psf", "nafnet-known-psf>lpd
 # more than the rule's 1 point: a reader of the Wiener estimate of the known lens, pre-trained once across the
 # lens family on such estimates, which needs no per-lens fit (docs/modelling.md).
 MEASURED_READERS: tuple[str, ...] = ("learned-reader-psf",)
-# The run's default chains: the proposal and the uncorrected image as a reference restorer. The learned
-# reader is always in it (the rule keeps it wherever entries hold it) and stays last of the readers, the
-# order the published entries' runs evaluated their chains in.
 # A reader named "cascade:<reader>" runs after every other chain, only on the plates none of them read
 # (benchmark.runner.cascade): the maximum-likelihood reader costs seconds a plate.
 CASCADE: tuple[str, ...] = (cascade_name("ideal-observer"),)
-STANDARD_ENSEMBLE: tuple[str, ...] = (tuple(c for c in PROPOSED_ENSEMBLE if c != LEARNED_READER) + MEASURED_ADDITIONS
-                                      + MEASURED_READERS + (LEARNED_READER, "raw") + CASCADE)
+# The rule re-applied to fresh runs (seed 0) of the five privacy lenses that measured the proposal, the
+# measured additions and readers, the learned reader and the cascade (leaderboard/studies/run_pairing.json
+# "proposal", `python -m benchmark.studies.run_pairing_study --run ...`; docs/ensemble.md): the chains whose
+# removal moved some lens's ensemble past the rule's thresholds, and the paper's lpdr on the sensor image and
+# after the strongest restorer; the twelve others, dropped together, moved no lens's ensemble at all. In the
+# order a run evaluates them, the cascade last. tests/benchmark/runner/test_standard_ensemble.py recomputes it.
+RUN_PROPOSAL: tuple[str, ...] = ("lpdr", "nafnet-known-psf", "nafnet-known-psf>lpdr", "learned-reader-psf",
+                                 LEARNED_READER, *CASCADE)
+# The run's default chains: the rule's, with the uncorrected image as a reference restorer (no chain reads it).
+STANDARD_ENSEMBLE: tuple[str, ...] = RUN_PROPOSAL[:-len(CASCADE)] + ("raw",) + CASCADE
 
 
 def chain_parts(chain: str) -> list[str]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import hashlib
+import json
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -134,18 +135,19 @@ def render(directory: Path = LEADERBOARD, date: str | None = None) -> str:
         "Chains that never decide a plate or a scene on any entry: " + (", ".join(f"`{a}`" for a in never) or "none")
         + ".", "",
         f"Left out of the proposal ({len(dropped)}): " + (", ".join(f"`{a}`" for a in dropped) or "none") + ".", "",
-        "This is `benchmark.runner.defaults.PROPOSED_ENSEMBLE`. The run's default, "
-        "`STANDARD_ENSEMBLE`, is it with the attackers newer than these entries that were measured stronger "
-        "(`MEASURED_ADDITIONS`: restorers; `MEASURED_READERS`: readers whose addition raised these entries' "
-        "ensemble on their own plates), `learned-reader` on the sensor image, the `raw` reference (the "
-        "uncorrected image's PSNR, read by no chain) and last the cascade (`CASCADE`: the maximum-likelihood "
-        "reader on the plates no chain before it read, benchmark.runner.cascade): `python -m benchmark run` "
-        "measures those chains only, "
+        "This is `benchmark.runner.defaults.PROPOSED_ENSEMBLE`. Runs measured it with the attackers newer than "
+        "these entries that were measured stronger (`MEASURED_ADDITIONS`: restorers; `MEASURED_READERS`: readers "
+        "whose addition raised these entries' ensemble on their own plates) and last the cascade (`CASCADE`: the "
+        "maximum-likelihood reader on the plates no chain before it read, benchmark.runner.cascade); the rule, "
+        "applied again to fresh runs of that set (below), chose the run's default, `STANDARD_ENSEMBLE` "
+        "(`RUN_PROPOSAL` and the `raw` reference, the uncorrected image's PSNR, read by no chain): "
+        "`python -m benchmark run` measures those chains only, "
         "`--attack NAME` exactly the attackers named (every reader after every restorer), `--all-chains` the full "
         "cross product of the attackers that run by default. Entries published before the standard ensemble "
         "hold the full cross product until `python -m benchmark publish` replaces them; those re-published with "
         "it hold only its chains, so a chain left out of it can no longer show that it decides there.",
         drift,
+        *_fresh_runs(directory),
         "## Every chain", "",
         "Summed over the entries it ran on; the largest removal effect over them, with its lens.", "",
         _summary(effects, proposed), "",
@@ -157,6 +159,38 @@ def render(directory: Path = LEADERBOARD, date: str | None = None) -> str:
         "harmless to remove and not together. This is the ensemble restricted to the proposed chains (those of "
         "them each entry has) against the ensemble of every chain.", "",
         _joint(entries, proposed), "", _joint_verdict(entries, proposed), ""])
+
+
+def _fresh_runs(directory: Path) -> list[str]:
+    """The section on the rule re-applied to fresh runs (``leaderboard/studies/run_pairing.json``'s
+    ``proposal``, ``python -m benchmark.studies.run_pairing_study --run ...``); nothing without one."""
+    path = directory / "studies" / "run_pairing.json"
+    record = json.loads(path.read_text()) if path.exists() else {}
+    proposal = record.get("proposal")
+    if not proposal:
+        return []
+    lines = []
+    for lens in proposal["lenses"]:
+        run = record["lenses"][lens]
+        effects = run["chain_effects"]
+        joint = proposal["joint_removal"].get(lens, {})
+        lines.append([lens, ", ".join(run.get("run_provenance", [])),
+                      "; ".join(f"`{c}` {_signed(e['plate_points'], 2)} pt" if e["kind"] == "plates"
+                                else f"`{c}` {_signed(e['psnr_db'], 3)} dB" for c, e in effects.items() if e["matters"]),
+                      "" if joint.get("plate_points") is None else _signed(-joint["plate_points"], 2),
+                      "" if joint.get("psnr_db") is None else _signed(-joint["psnr_db"], 3)])
+    return ["## Re-chosen on fresh runs", "",
+            f"The rule applied to fresh `python -m benchmark run --lens L --seeds 0` runs of {', '.join(proposal['lenses'])}"
+            " with the proposal above, the measured additions and the cascade (`leaderboard/studies/run_pairing.json`, "
+            "`python -m benchmark.studies.run_pairing_study --run ...`). A chain none of these runs held (the rest of "
+            "the cross product) had no say. The cascade reads only the plates the chains before it missed, so a "
+            "chain's removal effect overstates what dropping it costs (the cascade would then read some of its "
+            "plates).", "",
+            _table(["lens", "run (commit, date)", "chains past the rule: removal effect",
+                    "every dropped chain removed at once, plate acc pt", "the same, PSNR dB"], lines), "",
+            f"Strongest restorer: `{proposal['strongest_restorer']}`. Kept ({len(proposal['chains'])}): "
+            + ", ".join(f"`{c}`" for c in proposal["chains"]) + f". Dropped ({len(proposal['dropped'])}): "
+            + ", ".join(f"`{c}`" for c in proposal["dropped"]) + ". This is `benchmark.runner.defaults.RUN_PROPOSAL`.", ""]
 
 
 def _joint_verdict(entries: Sequence[Entry], proposed: Sequence[str]) -> str:

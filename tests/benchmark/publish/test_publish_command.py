@@ -58,9 +58,9 @@ def test_publish_replaces_entries_whole_and_resumes_from_the_cache(tmp_path, cap
     assert "publish defocus (smoke, seeds 0):" in printed and "published 2 leaderboard entries" in printed
     attacks = {r.attack for r in read_entry(entry).rows if r.kind in ("restorer", "reader", "chain", "reference")}
     # The older run's identity rows are gone; only the standard ensemble's chains are there (the known-PSF
-    # and learned attackers of a fixed lens: training-adversary skips it).
+    # and learned attackers of a fixed lens).
     assert attacks <= set(STANDARD_ENSEMBLE) and "identity" not in attacks
-    assert {"learned-reader", "wiener-known-psf>lpdr-oracle", "richardson-lucy-known-psf>lpdr"} <= attacks
+    assert {"learned-reader", "learned-reader-psf", "nafnet-known-psf>lpdr"} <= attacks
     # Run again: every task comes from the cache.
     plan = benchmark.plan(["defocus"], profile="smoke", seeds=[0])
     assert all(t.cached for t in plan.tasks)

@@ -10,7 +10,7 @@ import torch
 import attacks
 from benchmark import api
 from benchmark.runner.defaults import (
-    CASCADE, LEARNED_READER, MEASURED_ADDITIONS, MEASURED_READERS, PROPOSED_ENSEMBLE, STANDARD_ENSEMBLE, chain_parts)
+    CASCADE, LEARNED_READER, MEASURED_ADDITIONS, MEASURED_READERS, RUN_PROPOSAL, STANDARD_ENSEMBLE, chain_parts)
 from benchmark.runner import runner
 from benchmark.runner.config import RunConfig
 from benchmark.runner.evaluation import Attacked, PlateSet, ReadyReader, Target, read_sensor, run_restorers
@@ -70,11 +70,27 @@ def test_only_the_chains_of_the_ensemble_are_read_and_their_restorers_windows_re
     assert sorted(everything) == sorted(["read", "unread", "blind", "read>blind", "unread>blind"])
 
 
-def test_the_standard_ensemble_is_the_proposal_with_the_measured_additions_the_learned_reader_raw_and_the_cascade():
-    assert set(STANDARD_ENSEMBLE) == (set(PROPOSED_ENSEMBLE) | set(MEASURED_ADDITIONS) | set(MEASURED_READERS)
-                                      | {"learned-reader", "raw"} | set(CASCADE))
+def test_the_standard_ensemble_is_the_rule_re_applied_to_fresh_runs_of_the_privacy_lenses():
+    """``RUN_PROPOSAL`` is what the rule keeps on the chain effects of fresh runs of the five privacy lenses
+    (leaderboard/studies/run_pairing.json, recomputed here from the record's effects), and dropping every
+    other chain at once moved no run's ensemble past the rule's thresholds."""
+    import json
+    from pathlib import Path
+
+    from benchmark.results.ensemble_choice import PLATE_POINTS, PSNR_DB
+    from benchmark.studies.run_pairing_study import PRIVACY_LENSES, proposal
+
+    record = json.loads((Path(__file__).resolve().parents[3] / "leaderboard" / "studies" / "run_pairing.json")
+                        .read_text())
+    assert set(record["proposal"]["lenses"]) == set(PRIVACY_LENSES)
+    again = proposal(record, {})
+    assert again["chains"] == record["proposal"]["chains"] and again["dropped"] == record["proposal"]["dropped"]
+    assert set(RUN_PROPOSAL) == set(again["chains"])
+    for lens, joint in record["proposal"]["joint_removal"].items():
+        assert joint["plate_points"] <= PLATE_POINTS and joint["psnr_db"] <= PSNR_DB, (lens, joint)
+    assert set(STANDARD_ENSEMBLE) == set(RUN_PROPOSAL) | {"raw"}
     assert len(STANDARD_ENSEMBLE) == len(set(STANDARD_ENSEMBLE))
-    assert STANDARD_ENSEMBLE[-3:] == ("learned-reader", "raw", *CASCADE)
+    assert STANDARD_ENSEMBLE[-1:] == CASCADE and set(CASCADE) <= set(RUN_PROPOSAL)
     named = runner.standard_attackers()
     assert len(named) == len(set(named)) and set(named) == {p for c in STANDARD_ENSEMBLE for p in chain_parts(c)}
     # Every reader chain of the ensemble reads with a reader, after a restorer that is in it.
