@@ -39,7 +39,10 @@ def git_commit() -> str:
 
 # What a run's task results do not depend on: the commands that publish and study them, the CLI
 # that builds the run's configuration (itself part of every run's key) and the chart drawing.
-CODE_VERSION_EXCLUDES = ("benchmark/publish/", "benchmark/studies/", "benchmark/results/charts/", "benchmark/cli.py")
+# What shapes no task result: publishing, studies, charts, the CLI's words, and the measured-cost table a dry
+# run quotes (copied from docs/costs.md whenever a run is measured, which must not invalidate that run's cache).
+CODE_VERSION_EXCLUDES = ("benchmark/publish/", "benchmark/studies/", "benchmark/results/charts/", "benchmark/cli.py",
+                         "benchmark/store/measured_costs.json")
 
 
 @functools.lru_cache(maxsize=1)

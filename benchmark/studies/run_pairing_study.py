@@ -1,5 +1,5 @@
 """A fresh run's attackers against the published entry's, paired per plate and per scene:
-``python -m benchmark.studies.run_pairing_study --run runs/<dir> [--lens gp ...]``.
+``python -m benchmark.studies.run_pairing_study --run runs/<dir> [--run ...] [--lens gp ...]``.
 
 For each lens of the run that has a published quick entry, at one seed (default 0): the run's rows and the
 entry's rows of that seed, each reduced to its ensemble (``benchmark.results.ensemble``: a plate read by any
@@ -14,6 +14,10 @@ agree, which proves the pairing; a mismatch is reported, not paired).
   mean PSNR on the same scenes.
 - Costs: each attacker's fit seconds (and the cascade's), as its row measured them; the run's command and
   wall seconds; the load average when the study ran (the run's own load is not recorded).
+- Chains: what each chain of the run decides and its removal effect (``benchmark.results.ensemble_choice``)
+  and the run's commit and date. Once the record holds runs of all five ``PRIVACY_LENSES`` (``--run`` is
+  repeatable), the rule's proposal on them (``proposal``): the chains it keeps and drops, and what dropping
+  all of the latter at once costs each run's ensemble. ``benchmark.runner.defaults.RUN_PROPOSAL`` is that.
 
 Writes ``leaderboard/studies/run_pairing.json`` (merged per lens).
 """
@@ -190,9 +194,14 @@ def main(argv: list[str] | None = None) -> int:
             if s["paired"]:
                 line += f"; ensemble PSNR {s['entry_db']:.2f} -> {s['run_db']:.2f} dB ({s['run - entry']['verdict']})"
             print(line)
-    record["proposal"] = proposal(record, runs)
-    print(f"the rule on the runs of {', '.join(record['proposal']['lenses'])}: keeps {', '.join(record['proposal']['chains'])}; "
-          f"drops {', '.join(record['proposal']['dropped'])}")
+    missing = [lens for lens in PRIVACY_LENSES if "chain_effects" not in record["lenses"].get(lens, {})]
+    if missing:  # the rule chooses on all five privacy lenses or not at all
+        record.pop("proposal", None)
+        print(f"no proposal: the record holds no run of {', '.join(missing)}")
+    else:
+        record["proposal"] = proposal(record, runs)
+        print(f"the rule on the runs of {', '.join(record['proposal']['lenses'])}: keeps "
+              f"{', '.join(record['proposal']['chains'])}; drops {', '.join(record['proposal']['dropped'])}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(record, indent=1, default=float) + "\n")
     print(f"wrote {args.out}")
