@@ -35,16 +35,18 @@ def test_the_cpu_is_named_by_model_instructions_and_cores(tmp_path):
 def test_code_version_follows_what_results_depend_on(tmp_path):
     files = {"lenses/optics.py": "a", "attacks/readers/lpdr.py": "b", "benchmark/runner/tasks.py": "c",
              "benchmark/publish/report.py": "d", "benchmark/studies/s.py": "e", "benchmark/cli.py": "f",
-             "benchmark/results/charts/plot.py": "g", "attacks/README.md": "h", "attacks/weights/w.safetensors": "i"}
+             "benchmark/results/charts/plot.py": "g", "attacks/README.md": "h", "attacks/weights/w.safetensors": "i",
+             "benchmark/store/measured_costs.json": "j", "benchmark/store/profiles.json": "k"}
     for rel, text in files.items():
         (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / rel).write_text(text)
     base = provenance.code_digest(tmp_path)
     for rel in ("benchmark/publish/report.py", "benchmark/studies/s.py", "benchmark/cli.py",
-                "benchmark/results/charts/plot.py", "attacks/README.md"):
+                "benchmark/results/charts/plot.py", "attacks/README.md", "benchmark/store/measured_costs.json"):
         (tmp_path / rel).write_text("changed")
         assert provenance.code_digest(tmp_path) == base, rel
-    for rel in ("lenses/optics.py", "attacks/readers/lpdr.py", "benchmark/runner/tasks.py", "attacks/weights/w.safetensors"):
+    for rel in ("lenses/optics.py", "attacks/readers/lpdr.py", "benchmark/runner/tasks.py", "attacks/weights/w.safetensors",
+                "benchmark/store/profiles.json"):  # a table beside the quoted costs still counts
         before = provenance.code_digest(tmp_path)
         (tmp_path / rel).write_text("changed")
         assert provenance.code_digest(tmp_path) != before, rel
