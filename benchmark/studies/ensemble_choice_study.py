@@ -174,11 +174,11 @@ def _fresh_runs(directory: Path) -> list[str]:
         run = record["lenses"][lens]
         effects = run["chain_effects"]
         joint = proposal["joint_removal"].get(lens, {})
-        lines.append([lens, ", ".join(run.get("run_provenance", [])),
+        lines.append([lens, ", ".join(sorted({p.split()[-1] for p in run.get("run_provenance", [])})),
                       "; ".join(f"`{c}` {_signed(e['plate_points'], 2)} pt" if e["kind"] == "plates"
                                 else f"`{c}` {_signed(e['psnr_db'], 3)} dB" for c, e in effects.items() if e["matters"]),
-                      "" if joint.get("plate_points") is None else _signed(-joint["plate_points"], 2),
-                      "" if joint.get("psnr_db") is None else _signed(-joint["psnr_db"], 3)])
+                      "" if joint.get("plate_points") is None else _signed(0.0 - joint["plate_points"] + 0.0, 2),
+                      "" if joint.get("psnr_db") is None else _signed(0.0 - joint["psnr_db"] + 0.0, 3)])
     return ["## Re-chosen on fresh runs", "",
             f"The rule applied to fresh `python -m benchmark run --lens L --seeds 0` runs of {', '.join(proposal['lenses'])}"
             " with the proposal above, the measured additions and the cascade (`leaderboard/studies/run_pairing.json`, "
@@ -186,7 +186,7 @@ def _fresh_runs(directory: Path) -> list[str]:
             "the cross product) had no say. The cascade reads only the plates the chains before it missed, so a "
             "chain's removal effect overstates what dropping it costs (the cascade would then read some of its "
             "plates).", "",
-            _table(["lens", "run (commit, date)", "chains past the rule: removal effect",
+            _table(["lens", "run (date)", "chains past the rule: removal effect",
                     "every dropped chain removed at once, plate acc pt", "the same, PSNR dB"], lines), "",
             f"Strongest restorer: `{proposal['strongest_restorer']}`. Kept ({len(proposal['chains'])}): "
             + ", ".join(f"`{c}`" for c in proposal["chains"]) + f". Dropped ({len(proposal['dropped'])}): "
