@@ -45,7 +45,7 @@ def _table(head: Sequence[str], lines: Sequence[Sequence[object]]) -> str:
 
 
 def _signed(value: float, digits: int) -> str:
-    return "inf" if value == float("inf") else f"{value:+.{digits}f}"
+    return "inf" if value == float("inf") else f"{value + 0.0:+.{digits}f}"  # + 0.0: no "-0.00" for -0.0
 
 
 def _summary(effects: list[ChainEffect], proposed: Sequence[str]) -> str:
@@ -177,8 +177,8 @@ def _fresh_runs(directory: Path) -> list[str]:
         lines.append([lens, ", ".join(sorted({p.split()[-1] for p in run.get("run_provenance", [])})),
                       "; ".join(f"`{c}` {_signed(e['plate_points'], 2)} pt" if e["kind"] == "plates"
                                 else f"`{c}` {_signed(e['psnr_db'], 3)} dB" for c, e in effects.items() if e["matters"]),
-                      "" if joint.get("plate_points") is None else _signed(0.0 - joint["plate_points"] + 0.0, 2),
-                      "" if joint.get("psnr_db") is None else _signed(0.0 - joint["psnr_db"] + 0.0, 3)])
+                      "" if joint.get("plate_points") is None else _signed(-joint["plate_points"], 2),
+                      "" if joint.get("psnr_db") is None else _signed(-joint["psnr_db"], 3)])
     return ["## Re-chosen on fresh runs", "",
             f"The rule applied to fresh `python -m benchmark run --lens L --seeds 0` runs of {', '.join(proposal['lenses'])}"
             " with the proposal above, the measured additions and the cascade (`leaderboard/studies/run_pairing.json`, "

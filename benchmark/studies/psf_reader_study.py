@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from attacks.base import AttackBudget, FitContext
+from attacks.base import AttackBudget, FitContext, Reader
 from attacks.readers.learned_reader import LearnedReader, unpack_weights
 from attacks.readers.learned_reader_psf import LearnedReaderPSF, LearnedReaderPSFTuned
 from attacks.readers.plates.plate_sim import psf_radius_px
@@ -35,15 +35,15 @@ from attacks.training.shipped_weights import read_checked
 from benchmark.results import stats
 from benchmark.results.plate_scoring import WIDTH_BINS_PX
 from benchmark.runner.config import RunConfig
-from benchmark.runner.evaluation import read_plates
+from benchmark.runner.evaluation import PlateSet, read_plates
 from benchmark.runner.rows import plate_units
 from benchmark.runner.tasks import plate_set
-from benchmark.store.profiles import get_profile
+from benchmark.store.profiles import Profile, get_profile
 from benchmark.store.provenance import git_commit, package_versions
 from lenses.lens import Lens
 from lenses.spec import parse_spec
 
-__all__ = ["main", "measure_lens"]
+__all__ = ["lens_plates", "main", "measure_lens", "plate_outcomes"]
 
 ROOT = Path(__file__).resolve().parents[2]
 ENTRIES = ROOT / "leaderboard" / "entries"
@@ -83,16 +83,30 @@ def _compare(a: list[int], b: list[int]) -> dict[str, Any]:
             "n": c.n}
 
 
-def measure_lens(name: str, family_weights: Path | None = None, seed: int = 0) -> dict[str, Any]:
-    """The study's record for one lens (module docs)."""
+def lens_plates(name: str, seed: int = 0) -> tuple[dict[str, Any], Profile, Lens, PlateSet]:
+    """The published quick entry of lens ``name`` (its JSON), the quick profile, the entry's lens and the
+    plate set a run of ``seed`` reads (rebuilt: the same plate ids as the entry's rows)."""
     entry = json.loads((ENTRIES / f"{name}__quick__synthetic.json").read_text())
     profile = get_profile("quick")
     lens = Lens(parse_spec(entry["lens_spec"], f"{name} entry"))
     cfg = RunConfig(lenses=[name], attacks=[], scenes="synthetic", profile=profile, seeds=[seed])
-    t0 = time.perf_counter()
     with torch.no_grad():
         plates = plate_set(cfg, seed, lens)
     assert plates is not None, "the quick profile reads plate windows"
+    return entry, profile, lens, plates
+
+
+def plate_outcomes(reader: Reader, plates: PlateSet, profile: Profile) -> dict[str, tuple[int, int]]:
+    """Per plate id of ``plates``: (read exactly by the fitted ``reader``, width px), as a run scores it."""
+    outcomes, _, _ = read_plates(reader, plates.sensor, plates.scenes, profile.batch_size, "cpu")
+    units = plate_units(outcomes)
+    return dict(zip((units.prefix + i for i in units.ids), zip(units.values["correct"], units.values["width_px"])))
+
+
+def measure_lens(name: str, family_weights: Path | None = None, seed: int = 0) -> dict[str, Any]:
+    """The study's record for one lens (module docs)."""
+    t0 = time.perf_counter()
+    entry, profile, lens, plates = lens_plates(name, seed)
     seconds = {"plate_set": round(time.perf_counter() - t0, 1)}
     readers: dict[str, LearnedReader] = {"learned-reader-psf": LearnedReaderPSF(),
                                          "learned-reader-psf-tuned": LearnedReaderPSFTuned(),
@@ -116,10 +130,8 @@ def measure_lens(name: str, family_weights: Path | None = None, seed: int = 0) -
                 fits[label] = {"fit_s": round(time.perf_counter() - t0, 1), "steps": reader.curve.steps,
                                "held_out": [round(a, 4) for a in reader.curve.accuracy],
                                "kept_step": reader.curve.best_step, "stopped": reader.curve.stopped}
-        outcomes, _, _ = read_plates(reader, plates.sensor, plates.scenes, profile.batch_size, "cpu")
+        ours[label] = plate_outcomes(reader, plates, profile)
         seconds[label] = round(time.perf_counter() - t0, 1)
-        units = plate_units(outcomes)
-        ours[label] = dict(zip((units.prefix + i for i in units.ids), zip(units.values["correct"], units.values["width_px"])))
     published = _entry_outcomes(entry, seed)
     ids = sorted(ours["learned-reader-psf"])
     if set(ids) != set(published["learned-reader"]):

@@ -35,15 +35,9 @@ from attacks.base import AttackBudget, FitContext
 from attacks.readers.learned_reader import BUDGETS, LearnedReader
 from attacks.readers.learned_reader_psf import LearnedReaderPSF
 from attacks.training.plate_reader_training import ReaderBudget
-from benchmark.runner.config import RunConfig
-from benchmark.runner.evaluation import read_plates
-from benchmark.runner.rows import plate_units
-from benchmark.runner.tasks import plate_set
-from benchmark.store.profiles import get_profile
 from benchmark.store.provenance import git_commit, package_versions
-from benchmark.studies.psf_reader_study import ENTRIES, FROM_PX, LENSES, _bins, _compare, _entry_outcomes
-from lenses.lens import Lens
-from lenses.spec import parse_spec
+from benchmark.studies.psf_reader_study import (
+    FROM_PX, LENSES, _bins, _compare, _entry_outcomes, lens_plates, plate_outcomes)
 
 __all__ = ["candidate", "label", "main", "measure_lens", "published_fit"]
 
@@ -82,13 +76,7 @@ def published_fit(entry: dict[str, Any], seed: int = 0) -> dict[str, Any]:
 
 def measure_lens(name: str, budget: ReaderBudget, seed: int = 0) -> dict[str, Any]:
     """The study's record for one lens (module docs)."""
-    entry = json.loads((ENTRIES / f"{name}__quick__synthetic.json").read_text())
-    profile = get_profile("quick")
-    lens = Lens(parse_spec(entry["lens_spec"], f"{name} entry"))
-    cfg = RunConfig(lenses=[name], attacks=[], scenes="synthetic", profile=profile, seeds=[seed])
-    with torch.no_grad():
-        plates = plate_set(cfg, seed, lens)
-    assert plates is not None, "the quick profile reads plate windows"
+    entry, profile, lens, plates = lens_plates(name, seed)
     ours: dict[str, dict[str, tuple[int, int]]] = {}
     record: dict[str, Any] = {"lens_spec": entry["lens_spec"], "published_fit": published_fit(entry, seed)}
     for label, reader in (("candidate", _Scheduled(budget)), ("learned-reader-psf", LearnedReaderPSF())):
@@ -99,10 +87,7 @@ def measure_lens(name: str, budget: ReaderBudget, seed: int = 0) -> dict[str, An
             record["fit"] = {"fit_s": round(fit_s, 1), "steps": reader.curve.steps,
                              "held_out": [round(a, 4) for a in reader.curve.accuracy],
                              "kept_step": reader.curve.best_step, "stopped": reader.curve.stopped}
-        outcomes, _, _ = read_plates(reader, plates.sensor, plates.scenes, profile.batch_size, "cpu")
-        units = plate_units(outcomes)
-        ours[label] = dict(zip((units.prefix + i for i in units.ids),
-                               zip(units.values["correct"], units.values["width_px"])))
+        ours[label] = plate_outcomes(reader, plates, profile)
     published = _entry_outcomes(entry, seed)
     ids = sorted(ours["candidate"])
     if set(ids) != set(published["learned-reader"]):

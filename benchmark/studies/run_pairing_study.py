@@ -110,14 +110,18 @@ def _scenes(run_rows: list[Row], entry_rows: list[Row], seed: int) -> dict[str, 
             "run_restorers_db": {r: round(float(v), 3) for r, v in zip(ours[0], ours[1].mean(axis=0))}}
 
 
+def _as_entry(rows: list[Row], lens: str) -> Entry:
+    """A run's rows of one lens as an entry, the form ``benchmark.results.ensemble_choice`` measures."""
+    return Entry(lens=lens, profile="quick", scenes="synthetic", seeds=sorted({r.seed for r in rows}),
+                 profile_values={}, coefficients_um=None, lens_spec=None, rows=rows)
+
+
 def chain_effects(rows: list[Row], lens: str) -> dict[str, dict[str, Any]]:
     """Per chain of the run's rows of one lens and seed: what it decides and its removal effect
     (``benchmark.results.ensemble_choice``), and whether the rule keeps it for this lens (``matters``)."""
-    run = Entry(lens=lens, profile="quick", scenes="synthetic", seeds=sorted({r.seed for r in rows}), profile_values={},
-                coefficients_um=None, lens_spec=None, rows=rows)
     return {e.attack: {"kind": e.kind, "first": e.first, "only": e.only, "best_scenes": e.best_scenes,
                        "plate_points": round(e.plate_points, 3), "psnr_db": round(e.psnr_db, 4), "matters": e.matters}
-            for e in removal_effects([run])}
+            for e in removal_effects([_as_entry(rows, lens)])}
 
 
 def pair_lens(run_rows: list[Row], lens: str, seed: int, study: dict[str, Any] | None) -> dict[str, Any]:
@@ -149,8 +153,7 @@ def proposal(record: dict[str, Any], runs: dict[str, list[Row]]) -> dict[str, An
     for lens, rows in runs.items():
         if lens not in lenses:
             continue
-        run = Entry(lens=lens, profile="quick", scenes="synthetic", seeds=sorted({r.seed for r in rows}),
-                    profile_values={}, coefficients_um=None, lens_spec=None, rows=rows)
+        run = _as_entry(rows, lens)
         (plates_all, psnr_all), (plates_kept, psnr_kept) = ensemble_values(run), ensemble_values(run, set(chains))
         joint[lens] = {"plate_points": None if plates_all is None else round(plates_all - (plates_kept or 0.0), 3),
                        "psnr_db": None if psnr_all is None else round(psnr_all - (psnr_kept or 0.0), 4)}

@@ -84,11 +84,12 @@ def psf_support_px(psf: Tensor, energy: float = 0.995) -> int:
     y, x = torch.meshgrid(torch.arange(k, dtype=torch.float64), torch.arange(k, dtype=torch.float64), indexing="ij")
     r = torch.maximum((y - c).abs(), (x - c).abs()).flatten()  # the square rings a square patch margin adds
     order = torch.argsort(r, stable=True)
+    rings = r[order]
     radius = 0
     for channel in psf.detach().to(torch.float64):
         cumulative = torch.cumsum((channel / channel.sum()).flatten()[order], 0)
         inside = int(torch.searchsorted(cumulative, torch.tensor(energy - 1e-12, dtype=torch.float64)))
-        radius = max(radius, int(r[order][min(inside, r.numel() - 1)]))
+        radius = max(radius, int(rings[min(inside, rings.numel() - 1)]))
     return min(radius, c)
 
 
