@@ -5,7 +5,10 @@ external references are the leaderboard's own PNGs, by relative path. The trade-
 line per entry and threat model: "any attacker" (the markdown table's line) and, for each threat
 model, the worst case among that threat model's attackers only. Selecting a profile, scene set or
 threat model hides the other lines and chart points (one chart per profile and privacy figure);
-clicking a column header sorts by it.
+clicking a column header sorts by it. The first screen holds, per profile, the takeaway, the chart of
+utility against the plates the ensemble reads (intervals, Pareto front, the bracket up to the ideal
+observer's ceiling on the same plates) beside the headline table, and the entries shown apart (another
+version, benchmark.publish.versions).
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from typing import Any
 from matplotlib.ticker import MaxNLocator
 
 from benchmark.store.cache import atomic_write_text
-from benchmark.results.charts.tradeoff import TradeoffPoint, tradeoff_points
+from benchmark.results.charts.tradeoff import TradeoffPoint, pareto_front, tradeoff_points
 from benchmark.results.entries import Entry, file_safe
 from benchmark.publish.tables import (CONVENTION, FINDINGS_HEAD, PRIVATE_LEVEL, Column, findings_lines,
                                       headline_columns, table_columns, takeaways)
@@ -41,7 +44,7 @@ table.sortable th[aria-sort=ascending]::after{content:" \\25B2"}
 table.sortable th[aria-sort=descending]::after{content:" \\25BC"}
 tbody tr:nth-child(even){background:#fafafa}
 .filters{display:flex;gap:1rem;flex-wrap:wrap;margin:.5rem 0}.filters label{font-size:.9rem}
-.charts{display:flex;gap:1.5rem;flex-wrap:wrap}figure{margin:0}figcaption{font-size:.85rem;color:#555}
+.charts,.first{display:flex;gap:1.5rem;flex-wrap:wrap;align-items:flex-start}figure{margin:0}figcaption{font-size:.85rem;color:#555}
 svg .point{cursor:pointer}svg .axis{stroke:#444}svg .grid{stroke:#e6e6e6}svg text{font-size:11px;fill:#333}
 #tip{position:absolute;display:none;background:#fff;border:1px solid #888;border-radius:4px;padding:.3rem .5rem;
 font-size:.8rem;white-space:pre;pointer-events:none;box-shadow:0 2px 6px rgba(0,0,0,.2)}
@@ -129,9 +132,11 @@ def _th(column: Column) -> str:
     return f'<th title="{_e(column.tip)}">{_e(column.header)}</th>' if column.tip else f"<th>{_e(column.header)}</th>"
 
 
-def headline_html(entries: Sequence[Entry], study: Mapping[str, Any] | None = None) -> str:
-    """The first screen: per profile its takeaway (generated, tables.takeaways) and a table of the headline
-    columns only (tables.headline_columns), every header with its tooltip, then one legend of the columns."""
+def headline_html(entries: Sequence[Entry], study: Mapping[str, Any] | None = None,
+                  charts: Mapping[str, str] | None = None, apart: Sequence[Any] = ()) -> str:
+    """The first screen: per profile its takeaway (generated, tables.takeaways), its chart (`charts`: SVG by
+    profile) beside a table of the headline columns only (tables.headline_columns), every header with its
+    tooltip, the entries shown apart (`apart`: ``versions.Apart``), then one legend of the columns."""
     columns = headline_columns(study)
     said = takeaways(entries, study)
     parts = []
@@ -144,12 +149,18 @@ def headline_html(entries: Sequence[Entry], study: Mapping[str, Any] | None = No
                           for text, value in (c.cell(e, None) for c in columns))
             lines.append(f"<tr>{tds}</tr>")
         takeaway = said.get(profile)
+        others = [a for a in apart if a.entry.profile == profile]
         parts.append(
             f'<section class="profile" data-profile="{_e(profile)}"><h2>Profile {_e(profile)} '
             f'<span class="count">(scenes {_e(scenes)}; {len(mine)} lenses)</span></h2>'
             + (f'<p class="takeaway"><strong>Takeaway.</strong> {_e(takeaway)}</p>' if takeaway else "")
+            + '<div class="first">' + (charts or {}).get(profile, "")
             + f'<table class="headline sortable" data-profile="{_e(profile)}"><thead><tr>'
-            + "".join(_th(c) for c in columns) + "</tr></thead><tbody>" + "".join(lines) + "</tbody></table></section>")
+            + "".join(_th(c) for c in columns) + "</tr></thead><tbody>" + "".join(lines) + "</tbody></table></div>"
+            + (f'<p class="apart"><strong>Shown apart</strong> (another version than this board\'s; in no takeaway, '
+               f"front, chart or finding until re-published): "
+               + "; ".join(f"{_e(a.entry.lens)}: {_e(a.reason)}" for a in others) + "</p>" if others else "")
+            + "</section>")
     legend = "".join(f"<dt>{_e(c.header)}</dt><dd>{_e(c.tip)}</dd>" for c in columns)
     return "".join(parts) + f'<dl class="legend">{legend}</dl>'
 
@@ -188,7 +199,7 @@ def tradeoff_svg(points: Sequence[tuple[TradeoffPoint, str]], xlabel: str, unit:
     """Inline SVG of utility against privacy; each point (with its error bars) carries the filter
     attributes and a hover text naming lens, attacker and both intervals. ``points`` pairs a point
     with its threat view."""
-    xr = _range([v for p, _ in points for v in (p.privacy_low, p.privacy_high)])
+    xr = _range([v for p, _ in points for v in (p.privacy_low, p.privacy_high, p.ceiling) if v is not None])
     yr = _range([v for p, _ in points for v in (p.utility_low, p.utility_high)])
     sx = _scale(*xr, _PAD_L, _SVG_W - _PAD_R)
     sy = _scale(*yr, _SVG_H - _PAD_B, _PAD_T)
@@ -211,28 +222,38 @@ def tradeoff_svg(points: Sequence[tuple[TradeoffPoint, str]], xlabel: str, unit:
                  f'{_e(xlabel)} (lower = more private)</text>')
     parts.append(f'<text transform="translate(14 {(_SVG_H - _PAD_B + _PAD_T) / 2}) rotate(-90)" '
                  f'text-anchor="middle">utility mIoU (higher = more useful)</text>')
+    every = [p for p, threat in points if threat == ANY_THREAT]
+    front = [every[i] for i in pareto_front([(p.privacy, p.utility) for p in every])]
+    if len(front) > 1:
+        path = " ".join(f"{sx(p.privacy):.1f},{sy(p.utility):.1f}" for p in front)
+        parts.append(f'<polyline class="front" points="{path}" fill="none" stroke="#888" stroke-dasharray="5 4">'
+                     "<title>Pareto front (every attacker)</title></polyline>")
     for p, threat in points:
-        tip = (f"{p.lens} ({p.profile}, {p.scenes}; {threat})\nworst-case attacker: {p.attacker}\n"
-               f"{xlabel}: {p.privacy:.3g}{unit} [{p.privacy_low:.3g}, {p.privacy_high:.3g}]\n"
+        ceiling = "" if p.ceiling is None else f"\nideal observer's ceiling on the same plates: {p.ceiling:.3g}{unit}"
+        tip = (f"{p.lens} ({p.profile}, {p.scenes}; {threat})\n{p.attacker}\n"
+               f"{xlabel}: {p.privacy:.3g}{unit} [{p.privacy_low:.3g}, {p.privacy_high:.3g}]{ceiling}\n"
                f"mIoU: {p.utility:.3f} [{p.utility_low:.3f}, {p.utility_high:.3f}]\nbars: {p.error}")
         x, y, colour = sx(p.privacy), sy(p.utility), colours[p.lens]
+        bracket = ("" if p.ceiling is None else
+                   f'<line x1="{x:.1f}" y1="{y:.1f}" x2="{sx(p.ceiling):.1f}" y2="{y:.1f}" stroke-dasharray="2 3"/>'
+                   f'<circle cx="{sx(p.ceiling):.1f}" cy="{y:.1f}" r="5" fill="none"/>')
         parts.append(
             f'<g class="point" {_filter_attrs(p.profile, p.scenes, threat)} data-lens="{_e(p.lens)}" '
             f'data-tip="{_e(tip)}" stroke="{colour}">'
             f'<line x1="{sx(p.privacy_low):.1f}" y1="{y:.1f}" x2="{sx(p.privacy_high):.1f}" y2="{y:.1f}"/>'
             f'<line x1="{x:.1f}" y1="{sy(p.utility_low):.1f}" x2="{x:.1f}" y2="{sy(p.utility_high):.1f}"/>'
-            f'<circle cx="{x:.1f}" cy="{y:.1f}" r="5" fill="{colour}" fill-opacity="0.8"/></g>')
+            f'<circle cx="{x:.1f}" cy="{y:.1f}" r="5" fill="{colour}" fill-opacity="0.8"/>{bracket}</g>')
     parts.append("</svg>")
     return "".join(parts)
 
 
-def _points_by_threat(entries: Sequence[Entry], privacy: str, kind: str, scale: float
+def _points_by_threat(entries: Sequence[Entry], privacy: str, scale: float, study: Mapping[str, Any] | None = None
                       ) -> list[tuple[TradeoffPoint, str]]:
     out = []
     for e in entries:
         for threat, attacks in threat_views(e):
             view = e if attacks is None else _restricted(e, attacks)
-            out += [(p, threat) for p in tradeoff_points([view], privacy, kind, scale)]
+            out += [(p, threat) for p in tradeoff_points([view], privacy, scale, study)]
     return out
 
 
@@ -282,11 +303,23 @@ def flags_html(flags: Sequence[Any]) -> str:
             f"<tbody>{rows}</tbody></table>")
 
 
+PLATES_LABEL, PSNR_LABEL = "plates read by the ensemble %", "ensemble PSNR dB"
+
+
+def _svg_figure(profile: str, points: Sequence[tuple[TradeoffPoint, str]], label: str, unit: str,
+                colours: dict[str, str]) -> str:
+    return (f'<figure data-filtered="1" data-profile="{_e(profile)}">{tradeoff_svg(points, label, unit, colours)}'
+            f"<figcaption>Profile {_e(profile)}: utility against {_e(label)} (the tables' figure, 95 % intervals; "
+            "dashed: the Pareto front; open circle: what the ideal observer reads of the same plates); hover a "
+            "point for the lens and the intervals.</figcaption></figure>")
+
+
 def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequence[Path],
               study: Mapping[str, Any] | None = None, violations: Sequence[tuple[Entry, Any]] = (),
-              flags: Sequence[Any] = ()) -> str:
+              flags: Sequence[Any] = (), apart: Sequence[Any] = ()) -> str:
     """The whole page as text (deterministic: the same entries give the same bytes); `study`: the
-    ideal-observer study, `violations`: the readers above its ceilings (benchmark.results.observer.published)."""
+    ideal-observer study, `violations`: the readers above its ceilings (benchmark.results.observer.published),
+    `apart`: the entries of another version (benchmark.publish.versions), listed but not compared."""
     lenses = list(dict.fromkeys(e.lens for e in entries))
     colours = {lens: _PALETTE[i % len(_PALETTE)] for i, lens in enumerate(lenses)}
     threats = [ANY_THREAT] + sorted({t for e in entries for t, _ in threat_views(e)} - {ANY_THREAT})
@@ -294,16 +327,16 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
         _options("profile", "profile", list(dict.fromkeys(e.profile for e in entries)), "*", True),
         _options("scenes", "scenes", list(dict.fromkeys(e.scenes for e in entries)), "*", True),
         _options("threat", "threat model", threats, ANY_THREAT, False)])
-    svgs = []
-    for privacy, kind, scale, label, unit in (("psnr_db", "restorer", 1.0, "worst-case attacker PSNR dB", " dB"),
-                                              ("plate_acc", "reader", 100.0, "worst-case plate accuracy %", " %")):
-        points = _points_by_threat(entries, privacy, kind, scale)
+    first, svgs = {}, []
+    for privacy, scale, label, unit in (("plate_acc", 100.0, PLATES_LABEL, " %"), ("psnr_db", 1.0, PSNR_LABEL, " dB")):
+        points = _points_by_threat(entries, privacy, scale, study)
         for profile in dict.fromkeys(p.profile for p, _ in points):  # budgets are not comparable: a chart each
             mine = [(p, t) for p, t in points if p.profile == profile]
-            svgs.append(f'<figure data-filtered="1" data-profile="{_e(profile)}">'
-                        f"{tradeoff_svg(mine, label, unit, colours)}<figcaption>Profile {_e(profile)}: utility "
-                        f"against {_e(label)}; hover a point for the lens, the attacker and the intervals."
-                        "</figcaption></figure>")
+            figure = _svg_figure(profile, mine, label, unit, colours)
+            if privacy == "plate_acc":
+                first[profile] = figure
+            else:
+                svgs.append(figure)
     samples = [p for p in pictures if not p.name.startswith("plate_width__")]
     per_lens = []
     for lens in lenses:
@@ -327,7 +360,7 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
         "every attacker of the suite reads, lower is better)? A plate counts as read when any attacker read it; "
         f"\"private\" below means under {100 * PRIVATE_LEVEL:g} % at the upper 95 % limit. Hover a column header "
         "for what it shows; click it to sort.</p>",
-        headline_html(entries, study),
+        headline_html(entries, study, first, apart),
         '<details class="more" id="more"><summary>Everything else: the full tables (every figure, filterable by '
         "profile, scenes and threat model), ceiling violations, attack flags, interactive charts, the paper's "
         "findings, samples and charts</summary>",
@@ -339,7 +372,7 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
         "<h2>Utility against privacy</h2>", tradeoff_table(entries, study),
         "<h2>Ceiling violations</h2>", violations_html(violations),
         "<h2>Attack flags</h2>", flags_html(flags),
-        f'<h2>Utility against privacy, interactive</h2><div class="charts">{"".join(svgs)}</div>',
+        f'<h2>Utility against restoration, interactive</h2><div class="charts">{"".join(svgs)}</div>',
         "<h2>The paper's findings on these entries</h2>", findings_html(entries),
         "<h2>Samples per lens</h2>", "".join(per_lens) or "<p>No published sample images.</p>",
         f'<h2>Charts</h2><div class="charts">{static}</div>', "</details>",
@@ -348,7 +381,7 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
 
 def write_page(path: Path, entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequence[Path],
                study: Mapping[str, Any] | None = None, violations: Sequence[tuple[Entry, Any]] = (),
-               flags: Sequence[Any] = ()) -> Path:
+               flags: Sequence[Any] = (), apart: Sequence[Any] = ()) -> Path:
     """Write the page to `path` (chart and picture paths are linked relative to its folder)."""
-    atomic_write_text(path, page_html(entries, charts, pictures, study, violations, flags))
+    atomic_write_text(path, page_html(entries, charts, pictures, study, violations, flags, apart))
     return path

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Sequence
 from pathlib import Path
 
 from benchmark.store.cache import atomic_write_text
@@ -20,6 +21,7 @@ from benchmark.results.charts.tradeoff import write_tradeoff_chart
 from benchmark.results.entries import LEADERBOARD, Entry, display_order, load_entries, locked
 from benchmark.publish import board_files
 from benchmark.publish.page import write_page
+from benchmark.publish.versions import Apart, board_split
 from benchmark.publish.tables import (CONVENTION, bracket_lines, ensemble_summary, findings_table, flags_table, main_table,
                                       readme_table, takeaways, violations_table)
 from benchmark.results.attack_gap import CEILING_ALARM, GAP_ALARM, Flag, entry_flags
@@ -76,13 +78,15 @@ def study_charts(directory: Path, charts: Path) -> list[Path]:
     return written
 
 
-def entry_charts(entries: list[Entry], charts: Path) -> list[Path]:
+PLATES_LABEL = "plates read by the ensemble % (from the readable width)"
+PSNR_LABEL = "ensemble PSNR dB (each scene at its best restorer)"
+
+
+def entry_charts(entries: list[Entry], charts: Path, study: dict | None = None) -> list[Path]:
     """The leaderboard's charts of its entries (those with data to show)."""
     return [p for p in (
-        write_tradeoff_chart(entries, charts / "utility_vs_psnr.png", "psnr_db", "restorer",
-                             "worst-case attacker PSNR dB"),
-        write_tradeoff_chart(entries, charts / "utility_vs_plates.png", "plate_acc", "reader",
-                             "worst-case plate accuracy %", 100.0),
+        write_tradeoff_chart(entries, charts / "utility_vs_psnr.png", "psnr_db", PSNR_LABEL),
+        write_tradeoff_chart(entries, charts / "utility_vs_plates.png", "plate_acc", PLATES_LABEL, 100.0, study),
         write_attacker_speed_chart(entries, charts / "attackers_speed_vs_psnr.png"),
         write_profile_chart(entries, charts / "profiles.png"),
     ) if p is not None]
@@ -104,9 +108,24 @@ def violations_text(found: list) -> list[str]:
             "(benchmark.results.observer.consistency).**", "", violations_table(found)]
 
 
+def apart_text(apart: Sequence[Apart], study: dict | None = None) -> list[str]:
+    """The README's "Shown apart" section: entries of another version than their board's, marked, with their
+    figures in a table of their own (empty when there are none)."""
+    if not apart:
+        return []
+    return ["## Shown apart: entries of another version", "",
+            "Measured by another code version, torch version or plate definition than their profile's board "
+            "(benchmark.publish.versions): they enter no takeaway, Pareto front, finding, chart or bracket above "
+            "until re-published (`python -m benchmark publish --lens LENS`).", "",
+            *[f"- **{a.entry.lens}** ({a.entry.profile}): {a.reason}." for a in apart], "",
+            main_table([a.entry for a in apart], study), ""]
+
+
 def readme_text(entries: list[Entry], charts: list[Path], pictures: list[Path], study: dict | None = None,
-                violations: list | None = None, flags: list[Flag] | None = None) -> str:
-    """The leaderboard README: tables, then the charts and the published pictures (paths relative)."""
+                violations: list | None = None, flags: list[Flag] | None = None, apart: Sequence[Apart] = ()
+                ) -> str:
+    """The leaderboard README: tables (`entries`: the board's version; `apart`: the others, marked), then the
+    charts and the published pictures (paths relative)."""
     findings = findings_table(entries)
     summary = ensemble_summary(entries)
     said = [f"**Takeaway ({profile}).** {line}" for profile, line in takeaways(entries, study).items()]
@@ -118,6 +137,7 @@ def readme_text(entries: list[Entry], charts: list[Path], pictures: list[Path], 
             *(["## Privacy, bracketed", "", "What the suite's attackers read against what any attacker could "
                "(the ideal observer's ceiling, the tighter one where the study has it), 32-48 px plates, one "
                "frame:", "", *brackets, ""] if (brackets := bracket_lines(entries, study)) else []),
+            *apart_text(apart, study),
             "## Ceiling violations", "", *violations_text(violations or []), "",
             "## Attack flags", "", *flags_text(flags or []), "",
             *(["## The paper's findings on these entries", "", findings, ""] if findings else []),
@@ -139,23 +159,26 @@ def render(directory: Path = LEADERBOARD) -> list[Path]:
 
 
 def _render(directory: Path) -> list[Path]:
-    entries = display_order(load_entries(directory))
+    every = display_order(load_entries(directory))
+    board = board_split(every)
+    entries = board.current  # what the board compares: its version's entries only (benchmark.publish.versions)
     charts = directory / "charts"
     charts.mkdir(parents=True, exist_ok=True)
-    written = entry_charts(entries, charts) + study_charts(directory, charts) + observer_chart(directory, entries,
-                                                                                               charts)
-    widths = board_files.plate_width_charts(entries, charts)
-    pictures = board_files.backed_samples(entries, directory / "samples")
-    board_files.prune(directory, [*written, *widths, *pictures])  # what no entry or study backs
     study = load_study(directory)
-    violations = entry_violations(entries, study)  # each one logged as an ERROR there
-    flags = entry_flags(entries, study)
+    written = entry_charts(entries, charts, study) + study_charts(directory, charts) + observer_chart(directory,
+                                                                                                     entries, charts)
+    widths = board_files.plate_width_charts(every, charts)
+    pictures = board_files.backed_samples(every, directory / "samples")
+    board_files.prune(directory, [*written, *widths, *pictures])  # what no entry or study backs
+    violations = entry_violations(every, study)  # each one logged as an ERROR there
+    flags = entry_flags(every, study)
     for flag in flags:
         log.warning("attack flag: %s", flag.text())
     readme = directory / "README.md"
-    atomic_write_text(readme, readme_text(entries, written + widths, pictures, study, violations, flags))
-    pages = board_files.write_pages(directory, entries, written, widths, pictures)
-    page = write_page(directory / "index.html", entries, written + widths, pictures, study, violations, flags)
+    atomic_write_text(readme, readme_text(entries, written + widths, pictures, study, violations, flags, board.apart))
+    pages = board_files.write_pages(directory, every, written, widths, pictures)
+    page = write_page(directory / "index.html", entries, written + widths, pictures, study, violations, flags,
+                      board.apart)
     for path in (readme, *pages, *written, *widths, page):
         log.debug("wrote %s", path)
     return [readme, *pages, *written, *widths, page]
@@ -175,9 +198,18 @@ def _update_readme(readme: Path, directory: Path) -> bool:
     text = readme.read_text()
     if README_START not in text or README_END not in text:
         return False
-    entries = display_order(load_entries(directory))
     head, rest = text.split(README_START, 1)
     _, tail = rest.split(README_END, 1)
-    atomic_write_text(readme, f"{head}{README_START}\n{readme_table(entries, load_study(directory))}\n"
-                              f"{README_END}{tail}")
+    section = readme_results(display_order(load_entries(directory)), load_study(directory))
+    atomic_write_text(readme, f"{head}{README_START}\n{section}\n{README_END}{tail}")
     return True
+
+
+def readme_results(entries: Sequence[Entry], study: dict | None = None) -> str:
+    """The project README's results: the short table of the quick board's entries of its version
+    (`tables.readme_table`), then the quick entries shown apart (benchmark.publish.versions), named."""
+    board = board_split(entries)
+    apart = [a.entry.lens for a in board.apart if a.entry.profile == "quick"]
+    note = (f"\n\nNot in this table until re-published (another version, shown apart on the leaderboard): "
+            f"{', '.join(apart)}." if apart else "")
+    return readme_table(board.current, study) + note

@@ -391,6 +391,7 @@ def attacker_table(entries: Sequence[Entry]) -> str:
 # The privacy level of the takeaway: a lens counts as private when the upper 95 % limit of the plates its
 # ensemble reads is below it.
 PRIVATE_LEVEL = 0.05
+REFERENCE = "sharp"  # the no-lens reference entry: on the Pareto front, never "the lens that keeps most utility"
 
 
 def _headline_plates(e: Entry, attacks: set[str] | None) -> Cell:
@@ -476,18 +477,20 @@ def takeaways(entries: Sequence[Entry], study: Mapping[str, Any] | None = None) 
                             "lens can be said to keep most utility for its privacy.")
             continue
         private = [x for x in scored if x[2].interval[1] < PRIVATE_LEVEL]  # type: ignore[index]
+        lenses = [x for x in scored if x[0].lens != REFERENCE] or scored  # the sharp reference is no lens
         level = f"{100 * PRIVATE_LEVEL:g} %"
         if private:
             e, u, p = max(private, key=lambda x: x[1].value)
-            head = (f"of the {len(private)} of {len(scored)} lenses whose ensemble reads under {level} of plates "
+            head = (f"of the {len(private)} of {len(lenses)} lenses whose ensemble reads under {level} of plates "
                     f"(upper 95 % limit), {e.lens} keeps the most utility: mIoU {u.text(3)}, plates read "
                     f"{100 * p.value:.1f} % {_pct(p.interval)}")  # type: ignore[arg-type]
         else:
-            e, u, p = max(scored, key=lambda x: x[1].value)
-            widest = max(x[2].interval[1] for x in scored)  # type: ignore[index]
-            head = (f"none of the {len(scored)} lenses is shown to read under {level} of plates (upper 95 % limits "
-                    f"up to {100 * widest:.1f} %: too few plates); the most utility: {e.lens}, mIoU {u.text(3)}, "
-                    f"plates read {100 * p.value:.1f} % {_pct(p.interval)}")  # type: ignore[arg-type]
+            e, u, p = max(lenses, key=lambda x: x[1].value)
+            f = min(lenses, key=lambda x: x[2].value)
+            why = ": too few plates to tell" if f[2].value < PRIVATE_LEVEL else ""
+            head = (f"none of the {len(lenses)} lenses is shown to read under {level} of plates (the fewest read: "
+                    f"{f[0].lens}, {100 * f[2].value:.1f} % {_pct(f[2].interval)}{why}); the most utility: "  # type: ignore[arg-type]
+                    f"{e.lens}, mIoU {u.text(3)}, plates read {100 * p.value:.1f} % {_pct(p.interval)}")  # type: ignore[arg-type]
         front = [scored[i] for i in pareto_front([(x[2].value, x[1].value) for x in scored])]
         head += ("; Pareto front (each lens more private than the next, the next more useful): "
                  + ", ".join(f"{x[0].lens} ({x[1].value:.3f}, {100 * x[2].value:.1f} %)" for x in front))

@@ -13,6 +13,12 @@ says which. Plate units without recorded widths give one bin, every readable
 plate (>= LEGACY_READABLE_MIN_WIDTH_PX): the gap "at 32 px". Its 95 % interval combines the ceiling's
 Monte-Carlo interval and the ensemble's Wilson interval (low = ceiling low - ensemble high).
 
+Pooled bracket (``pooled_bracket``): the same figure as the leaderboard's pooled plate accuracy (the
+ensemble's reads of every readable plate of every seed) against what the ideal observer reads of those
+same plates: the mean over them of the ceiling at each plate's width (the tighter curve where it
+tabulates the width, else the genie's; a plate wider than every tabulated width counts at the widest,
+a lower bound since the ceiling rises with width). Its interval is the mean of the per-width 95 % limits.
+
 Flags (``Flag.kind``):
 
 - ``above-ceiling``: a reader or chain reads more than the genie's ceiling allows (its Wilson interval
@@ -52,8 +58,8 @@ from benchmark.results.observer.consistency import BinAccuracy, check_consistenc
 from benchmark.results.observer.published import marginal_t1_curve, study_record, t1_curve
 from benchmark.results.schema import FIT_STILL_RISING, LEARNS, Row, threat_models
 
-__all__ = ["CEILING_ALARM", "FLAG_KINDS", "GAP_ALARM", "GAP_WIDTHS_PX", "Flag", "Gap", "attack_gaps", "entry_flags",
-           "entry_gaps", "gap_curves", "lens_flags"]
+__all__ = ["CEILING_ALARM", "FLAG_KINDS", "GAP_ALARM", "GAP_WIDTHS_PX", "Bracket", "Flag", "Gap", "attack_gaps",
+           "entry_flags", "entry_gaps", "gap_curves", "lens_flags", "pooled_bracket"]
 
 GAP_ALARM = 0.30
 CEILING_ALARM = 0.50
@@ -169,6 +175,48 @@ def gap_curves(study: Mapping[str, Any] | None, lens: str, spec: Mapping[str, An
     record = study_record(study, lens, spec)
     genie, tighter = t1_curve(record), marginal_t1_curve(record)
     return (genie, None) if tighter is None else (tighter, genie)
+
+
+@dataclasses.dataclass(frozen=True)
+class Bracket:
+    """An entry's pooled privacy between what its ensemble reads and what the ideal observer reads of the
+    same readable plates (see the module docstring); ``ceiling_kind``: "marginal" when the tighter curve
+    gave every plate's ceiling, "genie" when it gave none, "mixed" otherwise."""
+
+    ensemble: Accuracy
+    ceiling: float
+    ceiling_interval: tuple[float, float]
+    ceiling_kind: str
+
+
+def _ceiling_of_width(width_px: float, curve: CeilingCurve, fallback: CeilingCurve | None
+                      ) -> tuple[float, tuple[float, float], str] | None:
+    for used in (curve, fallback):
+        if used is None:
+            continue
+        found = ceiling_at(used, width_px)
+        if found is None and width_px > float(used.widths_px.max()):
+            found = ceiling_at(used, float(used.widths_px.max()))
+        if found is not None:
+            return found[0], found[1], used.kind
+    return None
+
+
+def pooled_bracket(entry: Entry, study: Mapping[str, Any] | None, attacks: set[str] | None = None
+                   ) -> Bracket | None:
+    """The entry's pooled bracket (module docstring); None where the study does not cover its lens spec,
+    its plates record no widths, or a plate's width lies below every tabulated one."""
+    curve, fallback = gap_curves(study, entry.lens, entry.lens_spec)
+    ensemble = None if curve is None else plate_ensemble(entry.rows, attacks)
+    if curve is None or ensemble is None or any(p.widths is None for p in ensemble.per_seed):
+        return None
+    found = [_ceiling_of_width(float(w), curve, fallback) for p in ensemble.per_seed for w in p.widths]  # type: ignore[union-attr]
+    if not found or any(f is None for f in found):
+        return None
+    kinds = {f[2] for f in found}  # type: ignore[index]
+    return Bracket(ensemble.accuracy, float(np.mean([f[0] for f in found])),  # type: ignore[index]
+                   (float(np.mean([f[1][0] for f in found])), float(np.mean([f[1][1] for f in found]))),  # type: ignore[index]
+                   kinds.pop() if len(kinds) == 1 else "mixed")
 
 
 def entry_gaps(entry: Entry, study: Mapping[str, Any] | None, attacks: set[str] | None = None) -> list[Gap]:

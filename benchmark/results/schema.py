@@ -225,7 +225,7 @@ class Row:
         threat_model: The attacker's threat model (ThreatModel value), None for non-attack rows.
         notes: Name -> text, facts that are not numbers (e.g. the bound's assumptions).
         settings_hash: Key of the lens + attacker settings in results.json's "settings".
-        provenance: git_commit, packages, python, device, threads, date, wall_s.
+        provenance: code_version, git_commit, packages, python, device, threads, date, wall_s.
         units: Per-unit outcomes (per scene or per plate, see `Units`), or None when the row
             does not carry them (lens and bound rows; rows written before they existed).
     """

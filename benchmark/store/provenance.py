@@ -62,14 +62,15 @@ def code_version() -> str:
     return code_digest(Path(__file__).resolve().parents[2], memo=cache_root() / "code-digests.json")
 
 
-def code_digest(root: Path, memo: Path | None = None) -> str:
+def code_digest(root: Path, memo: Path | None = None, packages: str | None = None) -> str:
     """code_version's digest of the packages under `root`. `memo`: a JSON file of source digests by the
     SHA-256 of their bytes, so that only sources changed since it was written are parsed (parsing every
     source takes about a second); unreadable, it is rebuilt; written atomically, so runs may share it, and
-    only into a folder that exists."""
+    only into a folder that exists. `packages`: the package versions (``package_versions()``'s format) to
+    digest instead of the installed ones (for a row measured elsewhere)."""
     known = _read_memo(memo)
     used: dict[str, str] = {}
-    digest = hashlib.sha256(package_versions().encode())
+    digest = hashlib.sha256((package_versions() if packages is None else packages).encode())
     for package in ("lenses", "attacks", "benchmark"):
         for path in sorted((root / package).rglob("*")):
             rel = path.relative_to(root).as_posix()
@@ -158,8 +159,10 @@ def describe_device(device: str) -> str:
 
 
 def provenance(device: str) -> dict[str, object]:
-    """The run-wide provenance fields of a row (config hash, seed and wall time are per row)."""
+    """The run-wide provenance fields of a row (config hash, seed and wall time are per row); `code_version`
+    names what computed it, whatever the commit (the leaderboard compares entries of one version only)."""
     return {
+        "code_version": code_version(),
         "git_commit": git_commit(),
         "packages": package_versions(),
         "python": platform.python_version(),

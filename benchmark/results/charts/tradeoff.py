@@ -1,11 +1,15 @@
-"""Utility against privacy: one panel per profile, the worst-case attacker's figure per lens with
-its interval as error bars, labels in a column with leader lines (never overlapping), the Pareto front."""
+"""Utility against privacy: one panel per profile, the ensemble's figure per lens (the same figure as the
+tables': plates read by any reader chain, pooled from the readable width, or each scene at its best
+restorer) with its interval as error bars, the bracket up to the ideal observer's ceiling on the same
+plates where the study covers the lens, labels in a column with leader lines (never overlapping), the
+Pareto front."""
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 from matplotlib.figure import Figure
@@ -13,6 +17,8 @@ from matplotlib.figure import Figure
 from benchmark.results.charts import new_figure, save_figure
 from benchmark.results.charts.point_labels import LABEL_FONT_PT, label_points, line_height_in
 from benchmark.results import pooled
+from benchmark.results.attack_gap import pooled_bracket
+from benchmark.results.ensemble import plate_ensemble, scene_ensemble
 from benchmark.results.entries import Entry
 from benchmark.results.pooled import Pooled
 
@@ -26,10 +32,11 @@ _MIN_X_SPAN, _MIN_Y_SPAN = 2.0, 0.02
 
 @dataclasses.dataclass(frozen=True)
 class TradeoffPoint:
-    """One lens of one profile: utility (mIoU) against its strongest attacker's privacy figure.
+    """One lens of one profile: utility (mIoU) against its ensemble's privacy figure.
 
     ``*_low``/``*_high`` bound the error bar: the pooled 95 % interval (benchmark.results.pooled), or
-    no bar where the rows carry no per-unit outcomes (``error`` says which)."""
+    no bar where the rows carry no per-unit outcomes (``error`` says which). ``ceiling``: the ideal
+    observer's pooled ceiling on the same plates (``attack_gap.pooled_bracket``), None where there is none."""
 
     lens: str
     profile: str
@@ -42,6 +49,7 @@ class TradeoffPoint:
     utility_low: float
     utility_high: float
     error: str
+    ceiling: float | None = None
 
 
 def _bounds(found: Pooled, scale: float) -> tuple[float, float, str]:
@@ -51,24 +59,41 @@ def _bounds(found: Pooled, scale: float) -> tuple[float, float, str]:
     return found.value * scale, found.value * scale, f"no bar: no {found.missing}"
 
 
-def tradeoff_points(entries: Sequence[Entry], privacy: str, kind: str, scale: float = 1.0) -> list[TradeoffPoint]:
-    """Points of every entry with a utility figure and an attacker figure `privacy` of `kind`
-    ("restorer" or "reader"), scaled by `scale` (100 for a fraction shown in %); each figure pooled over
-    its units and seeds with its pooled 95 % interval as the bar (benchmark.results.pooled)."""
+def _of(n: int, what: str) -> str:
+    return f"ensemble of {n} {what}{'' if n == 1 else 's'}"
+
+
+def _ensemble_figure(e: Entry, privacy: str) -> tuple[Pooled, str] | None:
+    """The ensemble's pooled figure and what it counts ("ensemble of 6 chains"), as the tables show it."""
+    if privacy == "plate_acc":
+        ensemble = plate_ensemble(e.rows)
+        found = pooled.plates(e) if ensemble is not None else None
+        return None if found is None else (found, _of(len(ensemble.chains), "chain"))  # type: ignore[union-attr]
+    scenes = scene_ensemble(e.rows, privacy)
+    if scenes is None:
+        return None
+    return (Pooled(scenes.mean, scenes.interval, scenes.seed_std, len(scenes.seed_values)),
+            _of(len(scenes.restorers), "restorer"))
+
+
+def tradeoff_points(entries: Sequence[Entry], privacy: str, scale: float = 1.0,
+                    study: Mapping[str, Any] | None = None) -> list[TradeoffPoint]:
+    """Points of every entry with a utility figure and an ensemble figure `privacy` ("plate_acc": plates read
+    by any reader chain; "psnr_db": each scene at its best restorer), scaled by `scale` (100 for a fraction
+    shown in %), each pooled over its units and seeds with its pooled 95 % interval as the bar
+    (benchmark.results.pooled); plate points carry the pooled ceiling where `study` covers the lens."""
     points = []
     for e in entries:
-        found = e.worst_case(privacy, kind)
         util = pooled.miou(e)
+        found = _ensemble_figure(e, privacy)
         if util is None or found is None:
             continue
-        attacker = found[1]
-        figure = pooled.chain_plates(e, attacker) if privacy == "plate_acc" else pooled.chain_metric(e, attacker,
-                                                                                                      privacy)
-        if figure is None:
-            continue
+        figure, attacker = found
         (u_lo, u_hi, u_err), (p_lo, p_hi, p_err) = _bounds(util, 1.0), _bounds(figure, scale)
+        bracket = pooled_bracket(e, study) if privacy == "plate_acc" else None
         points.append(TradeoffPoint(e.lens, e.profile, e.scenes, attacker, figure.value * scale, p_lo, p_hi,
-                                    util.value, u_lo, u_hi, u_err if u_err == p_err else f"{p_err} / {u_err}"))
+                                    util.value, u_lo, u_hi, u_err if u_err == p_err else f"{p_err} / {u_err}",
+                                    None if bracket is None else bracket.ceiling * scale))
     return points
 
 
@@ -112,13 +137,19 @@ def tradeoff_figure(points: Sequence[TradeoffPoint], xlabel: str) -> Figure:
             ax.errorbar(p.privacy, p.utility, xerr=[[p.privacy - p.privacy_low], [p.privacy_high - p.privacy]],
                         yerr=[[p.utility - p.utility_low], [p.utility_high - p.utility]], fmt=markers[p.lens],
                         color=colours[p.lens], capsize=3, ms=6, lw=1)
+            if p.ceiling is not None:  # the bracket: what the ideal observer reads of the same plates
+                ax.plot([p.privacy, p.ceiling], [p.utility, p.utility], ":", color=colours[p.lens], lw=1)
+                ax.plot([p.ceiling], [p.utility], markers[p.lens], mfc="none", color=colours[p.lens], ms=6)
         front = [members[i] for i in pareto_front([(p.privacy, p.utility) for p in members])]
         ax.plot([p.privacy for p in front], [p.utility for p in front], "--", color="grey", lw=1, label="Pareto front")
-        ax.set_xlim(*_limits([p.privacy_low for p in members], [p.privacy_high for p in members], _MIN_X_SPAN))
+        ax.set_xlim(*_limits([p.privacy_low for p in members],
+                             [max(p.privacy_high, p.ceiling or p.privacy_high) for p in members], _MIN_X_SPAN))
         ax.set_ylim(*_limits([p.utility_low for p in members], [p.utility_high for p in members], _MIN_Y_SPAN))
         ax.set_xlabel(xlabel + " (lower = more private)")
         ax.set_ylabel("utility mIoU (higher = more useful)")
         errors = ", ".join(sorted({p.error for p in members}))
+        if any(p.ceiling is not None for p in members):
+            errors += "; open = ceiling, same plates"
         ax.set_title(f"profile {profile}, scenes {', '.join(dict.fromkeys(p.scenes for p in members))}: "
                      f"error bars = {errors}", fontsize=9, loc="left")
         ax.grid(alpha=0.3)
@@ -128,10 +159,10 @@ def tradeoff_figure(points: Sequence[TradeoffPoint], xlabel: str) -> Figure:
     return fig
 
 
-def write_tradeoff_chart(entries: Sequence[Entry], path: Path, privacy: str, kind: str, xlabel: str,
-                         scale: float = 1.0) -> Path | None:
+def write_tradeoff_chart(entries: Sequence[Entry], path: Path, privacy: str, xlabel: str, scale: float = 1.0,
+                         study: Mapping[str, Any] | None = None) -> Path | None:
     """Write the trade-off chart of `privacy` (see tradeoff_points) to `path`; None when no entry has one."""
-    points = tradeoff_points(entries, privacy, kind, scale)
+    points = tradeoff_points(entries, privacy, scale, study)
     if not points:
         return None
     return save_figure(tradeoff_figure(points, xlabel), path, dpi=100, layout=False)

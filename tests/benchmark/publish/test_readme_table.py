@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from benchmark.publish.report import README_END, README_START, update_readme
+from benchmark.publish.report import README_END, README_START, readme_results, update_readme
 from benchmark.publish.tables import readme_table
+from benchmark.publish.versions import board_split
 from benchmark.results.entries import LEADERBOARD, display_order, load_entries
 from benchmark.results.observer.published import load_study
 
@@ -19,12 +20,17 @@ def _section(text: str) -> str:
 def test_the_readme_holds_the_boards_own_short_table():
     text = README.read_text()
     assert README_START in text and README_END in text, "the README lost its results markers"
-    expected = readme_table(display_order(load_entries()), load_study(LEADERBOARD))
+    entries = display_order(load_entries())
+    expected = readme_results(entries, load_study(LEADERBOARD))
     assert _section(text) == expected.strip(), "the README's table is stale: run python -m benchmark report"
-    header = expected.splitlines()[0]
+    table = readme_table(board_split(entries).current, load_study(LEADERBOARD))
+    header = table.splitlines()[0]
     assert header.count("|") - 1 <= 8  # a short table: at most 8 columns
-    quick = [e.lens for e in display_order(load_entries()) if e.profile == "quick"]
-    assert [line.split(" | ")[0].strip("| ") for line in expected.splitlines()[2:]] == quick  # quick entries only
+    board = board_split(entries)
+    quick = [e.lens for e in board.current if e.profile == "quick"]
+    assert [line.split(" | ")[0].strip("| ") for line in table.splitlines()[2:]] == quick  # the quick board only
+    for apart in (a.entry.lens for a in board.apart if a.entry.profile == "quick"):  # named, not tabled
+        assert apart in expected.split(table, 1)[1]
 
 
 def test_update_readme_rewrites_only_between_the_markers(tmp_path):
@@ -33,6 +39,6 @@ def test_update_readme_rewrites_only_between_the_markers(tmp_path):
     assert update_readme(readme, LEADERBOARD)
     text = readme.read_text()
     assert text.startswith("before\n") and text.endswith(f"{README_END}\nafter\n") and "old table" not in text
-    assert _section(text) == readme_table(display_order(load_entries()), load_study(LEADERBOARD)).strip()
+    assert _section(text) == readme_results(display_order(load_entries()), load_study(LEADERBOARD)).strip()
     readme.write_text("no markers\n")
     assert not update_readme(readme, LEADERBOARD) and readme.read_text() == "no markers\n"

@@ -11,7 +11,7 @@ import pytest
 
 from benchmark.publish import findings
 from benchmark.results import stats
-from benchmark.results.attack_gap import attack_gaps, lens_flags
+from benchmark.results.attack_gap import attack_gaps, lens_flags, pooled_bracket
 from benchmark.results.ensemble import (chain_accuracy, plate_ensemble, pooled_min_width, scene_ensemble,
                                        strongest_chain)
 from benchmark.results.plate_scoring import LEGACY_READABLE_MIN_WIDTH_PX, READABLE_MIN_WIDTH_PX
@@ -246,3 +246,25 @@ def test_plate_finding_is_decided_on_the_ensemble_not_the_best_single_reader():
     assert found.label == stats.DOES_NOT_HOLD  # the claim "GP lowers ..." is refuted by the ensemble
     assert found.attack_a == "ensemble of 2 chains" and found.a is not None and found.a.mean == pytest.approx(0.5)
     assert found.figure_text("a").startswith("50.0")
+
+
+def test_pooled_bracket_is_the_mean_ceiling_over_the_same_readable_plates():
+    # Plates of 16 (not readable: out of the pooled figure and of its ceiling), 24, 32, 48, 64 and 128 px against
+    # a curve tabulated at 16, 32, 64 px: 24 and 48 px interpolate, 128 px counts at the widest (64 px).
+    study, spec = _study(_curve())
+    widths = [16, 24, 32, 48, 64, 128]
+    rows = [_reader("lpdr-oracle", 0, [1, 1, 0, 0, 1, 0], lens="defocus", widths=widths)]
+    entry = make_entry("defocus", rows, {"name": PROFILE}, None, spec)
+    bracket = pooled_bracket(entry, study)
+    assert bracket is not None and bracket.ceiling_kind == "genie"
+    ceilings = [0.75, 0.9, 0.95, 1.0, 1.0]
+    assert bracket.ceiling == pytest.approx(np.mean(ceilings))
+    # The limits interpolate the tabulated (clipped) limits: 48 px lies between 0.92 and 1.0.
+    assert bracket.ceiling_interval == pytest.approx((np.mean([c - 0.02 for c in ceilings]),
+                                                      np.mean([0.77, 0.92, 0.96, 1.0, 1.0])))
+    assert (bracket.ensemble.hits, bracket.ensemble.n) == (2, 5)  # the table's pooled figure: 24 px and up
+    # A plate narrower than every tabulated width has no ceiling: no bracket rather than a guessed one.
+    narrow, _ = _study(_curve(widths=(32, 64), ceiling=(0.9, 1.0)))
+    assert pooled_bracket(entry, narrow) is None
+    # No study record for the lens's spec: none either.
+    assert pooled_bracket(make_entry("defocus", rows, {"name": PROFILE}, None, {"other": 1}), study) is None
