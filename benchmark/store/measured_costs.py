@@ -93,5 +93,6 @@ def quote(profile: str, kind: str, seed: int, lens: str = "", restorer: str | No
         named = [t for t in candidates if t.get("restorer") == "*" and restorer not in listed]
     if not named:
         return None
-    return Quote(float(named[0]["seconds"]), bool(named[0].get("together")), bool(named[0].get("once_per_seed")),
-                 machine, date)
+    task = named[0]  # a figure measured elsewhere or on another day names its own machine and date
+    return Quote(float(task["seconds"]), bool(task.get("together")), bool(task.get("once_per_seed")),
+                 task.get("machine", machine), task.get("date", date))
