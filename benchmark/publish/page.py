@@ -44,7 +44,8 @@ table.sortable th[aria-sort=ascending]::after{content:" \\25B2"}
 table.sortable th[aria-sort=descending]::after{content:" \\25BC"}
 tbody tr:nth-child(even){background:#fafafa}
 .filters{display:flex;gap:1rem;flex-wrap:wrap;margin:.5rem 0}.filters label{font-size:.9rem}
-.charts,.first{display:flex;gap:1.5rem;flex-wrap:wrap;align-items:flex-start}figure{margin:0}figcaption{font-size:.85rem;color:#555}
+.charts,.first{display:flex;gap:1.5rem;flex-wrap:wrap;align-items:flex-start}
+.first figure{max-width:470px}.first svg{width:470px;height:auto}svg text.label{font-size:10px}figure{margin:0}figcaption{font-size:.85rem;color:#555}
 svg .point{cursor:pointer}svg .axis{stroke:#444}svg .grid{stroke:#e6e6e6}svg text{font-size:11px;fill:#333}
 #tip{position:absolute;display:none;background:#fff;border:1px solid #888;border-radius:4px;padding:.3rem .5rem;
 font-size:.8rem;white-space:pre;pointer-events:none;box-shadow:0 2px 6px rgba(0,0,0,.2)}
@@ -159,7 +160,8 @@ def headline_html(entries: Sequence[Entry], study: Mapping[str, Any] | None = No
             + "".join(_th(c) for c in columns) + "</tr></thead><tbody>" + "".join(lines) + "</tbody></table></div>"
             + (f'<p class="apart"><strong>Shown apart</strong> (another version than this board\'s; in no takeaway, '
                f"front, chart or finding until re-published): "
-               + "; ".join(f"{_e(a.entry.lens)}: {_e(a.reason)}" for a in others) + "</p>" if others else "")
+               + ", ".join(f'<span title="{_e(a.reason)}">{_e(a.entry.lens)} ({_e(", ".join(a.fields))})</span>'
+                           for a in others) + " differ; hover a lens for how.</p>" if others else "")
             + "</section>")
     legend = "".join(f"<dt>{_e(c.header)}</dt><dd>{_e(c.tip)}</dd>" for c in columns)
     return "".join(parts) + f'<dl class="legend">{legend}</dl>'
@@ -242,7 +244,8 @@ def tradeoff_svg(points: Sequence[tuple[TradeoffPoint, str]], xlabel: str, unit:
             f'data-tip="{_e(tip)}" stroke="{colour}">'
             f'<line x1="{sx(p.privacy_low):.1f}" y1="{y:.1f}" x2="{sx(p.privacy_high):.1f}" y2="{y:.1f}"/>'
             f'<line x1="{x:.1f}" y1="{sy(p.utility_low):.1f}" x2="{x:.1f}" y2="{sy(p.utility_high):.1f}"/>'
-            f'<circle cx="{x:.1f}" cy="{y:.1f}" r="5" fill="{colour}" fill-opacity="0.8"/>{bracket}</g>')
+            f'<circle cx="{x:.1f}" cy="{y:.1f}" r="5" fill="{colour}" fill-opacity="0.8"/>{bracket}'
+            f'<text class="label" x="{x + 7:.1f}" y="{y - 7:.1f}" stroke="none">{_e(p.lens)}</text></g>')
     parts.append("</svg>")
     return "".join(parts)
 

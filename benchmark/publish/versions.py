@@ -89,6 +89,7 @@ class Apart:
     entry: Entry
     versions: tuple[Version, ...]
     reason: str
+    fields: tuple[str, ...] = ()  # which of code, torch, plates differ from the board's
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,7 +120,8 @@ def board_split(entries: Sequence[Entry]) -> Board:
             current.append(e)
             continue
         reason = (f"{len(mine)} versions in one entry; " if len(mine) > 1 else "") + _differences(mine, board)
-        apart.append(Apart(e, tuple(mine), reason))
+        fields = tuple(f for f in _FIELDS if any(getattr(v, f) != getattr(board, f) for v in mine))
+        apart.append(Apart(e, tuple(mine), reason, fields))
     return Board(current, apart, versions)
 
 
