@@ -134,9 +134,10 @@ def readme_text(entries: list[Entry], charts: list[Path], pictures: list[Path], 
             "The same tables, sortable and filterable by profile, scenes and threat model, with interactive "
             "charts: [index.html](index.html) (a self-contained page; open it from disk).", "",
             "## Utility against privacy", "", main_table(entries, study), "", *([summary, ""] if summary else []),
-            *(["## Privacy, bracketed", "", "What the suite's attackers read against what any attacker could "
-               "(the ideal observer's ceiling, the tighter one where the study has it), 32-48 px plates, one "
-               "frame:", "", *brackets, ""] if (brackets := bracket_lines(entries, study)) else []),
+            *(["## Privacy, bracketed", "", "What the suite's attackers read of every readable plate (the tables' "
+               "figure) against what the ideal observer reads of the same plates (the mean of each plate's ceiling "
+               "at its width, the tighter one where the study has it; benchmark.results.attack_gap.pooled_bracket), "
+               "one frame:", "", *brackets, ""] if (brackets := bracket_lines(entries, study)) else []),
             *apart_text(apart, study),
             "## Ceiling violations", "", *violations_text(violations or []), "",
             "## Attack flags", "", *flags_text(flags or []), "",

@@ -18,7 +18,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from benchmark.publish.findings import Finding, check_findings
-from benchmark.results.attack_gap import GAP_ALARM, GAP_WIDTHS_PX, Flag, ceiling_at, entry_gaps
+from benchmark.results.attack_gap import GAP_ALARM, GAP_WIDTHS_PX, Flag, ceiling_at, entry_gaps, pooled_bracket
 from benchmark.results import pooled
 from benchmark.results.ensemble import chain_accuracy, plate_ensemble, scene_ensemble
 from benchmark.results.entries import Entry
@@ -429,26 +429,34 @@ def readme_table(entries: Sequence[Entry], study: Mapping[str, Any] | None = Non
                      [[c.cell(e, None)[0] for c in columns] for e in entries if e.profile == profile])
 
 
-def bracket_lines(entries: Sequence[Entry], study: Mapping[str, Any] | None, width_px: int = 32) -> list[str]:
-    """One sentence per entry the study covers: its privacy at the bin from `width_px` lies between what the
-    ensemble reads and the ceiling the gap is taken against (the tighter one where the study has it)."""
+def bracket_lines(entries: Sequence[Entry], study: Mapping[str, Any] | None) -> list[str]:
+    """One sentence per entry the study covers: its privacy lies between what the ensemble reads of its readable
+    plates (the tables' figure) and what the ideal observer reads of the same plates (``attack_gap.pooled_bracket``,
+    the tighter ceiling where the study has it), the verdict the gap's interval's."""
     lines = []
     for e in entries:
-        gap = next((g for g in entry_gaps(e, study) if g.low_px == width_px), None)
-        if gap is None:
+        bracket = pooled_bracket(e, study)
+        if bracket is None:
             continue
-        a = gap.ensemble
-        which = ("the tighter ceiling: an ideal observer that must find the plate" if gap.ceiling_kind == "marginal"
-                 else "the genie ceiling: an ideal observer told where the plate is")
-        low, high = gap.interval
+        a = bracket.ensemble
+        which = {"marginal": "the tighter ceiling: an ideal observer that must find the plate",
+                 "genie": "the genie ceiling: an ideal observer told where the plate is"}.get(
+            bracket.ceiling_kind, "the tighter ceiling where the study tabulates the plate's width, else the genie's")
+        low, high = bracket.ceiling_interval[0] - a.interval[1], bracket.ceiling_interval[1] - a.interval[0]
         points = f"{100 * GAP_ALARM:.0f} points"
         verdict = (f"the attackers are more than {points} below it: the suite overstates this lens's privacy"
                    if low > GAP_ALARM else f"the attackers are within {points} of it" if high < GAP_ALARM else
                    f"cannot tell whether the attackers are within {points} of it (too few plates)")
-        lines.append(f"- **{e.lens}** ({e.profile}, {gap.where()}): between {100 * a.value:.1f} % "
-                     f"{_pct(a.interval)} read by the ensemble and {100 * gap.ceiling:.1f} % "
-                     f"{_pct(gap.ceiling_interval)} ({which}); {verdict}.")
+        lines.append(f"- **{e.lens}** ({e.profile}, plates from {_from_width(e)} px): between {100 * a.value:.1f} % "
+                     f"{_pct(a.interval)} read by the ensemble and {100 * bracket.ceiling:.1f} % "
+                     f"{_pct(bracket.ceiling_interval)} read by the ideal observer ({which}); {verdict}.")
     return lines
+
+
+def _from_width(e: Entry) -> str:
+    """The width the entry's pooled plate figure starts at, in px."""
+    ensemble = plate_ensemble(e.rows)
+    return "?" if ensemble is None else f"{ensemble.min_width_px():g}"
 
 
 def _pct(interval: tuple[float, float]) -> str:

@@ -283,7 +283,8 @@ def test_the_chart_draws_the_tighter_ceiling_per_bin_and_the_bracket_to_the_ense
 
 def test_the_board_brackets_privacy_between_the_ensemble_and_the_tighter_ceiling(planted):
     """The tighter-ceiling column and the bracket sentence give the marginalised ceiling where the study has
-    it (the genie's, said so, where not), beside what the ensemble reads; the verdict is the gap's interval's."""
+    it (the genie's, said so, where not), beside what the ensemble reads of the same plates; the verdict is
+    the gap's interval's."""
     from benchmark.publish.tables import bracket_lines, observer_columns
     from benchmark.results.entries import make_entry
     from benchmark.results.schema import Units
@@ -302,14 +303,14 @@ def test_the_board_brackets_privacy_between_the_ensemble_and_the_tighter_ceiling
     honest = entry(reads["honest"][:400])
     column = observer_columns(study)[1]
     assert column.header.startswith("tighter ceiling") and column.cell(honest, None)[1] == pytest.approx(100 * tight)
-    (line,) = bracket_lines([honest], study, width_px=24)
+    (line,) = bracket_lines([honest], study)
     assert f"{100 * tight:.1f} %" in line and "tighter ceiling" in line and "within 30 points" in line
-    (weak,) = bracket_lines([entry(np.zeros(400, bool))], study, width_px=24)
+    (weak,) = bracket_lines([entry(np.zeros(400, bool))], study)
     assert "between 0.0 %" in weak and ("more than 30 points below" in weak) == (tight > 0.35)
-    (few,) = bracket_lines([entry(np.zeros(3, bool))], study, width_px=24)
+    (few,) = bracket_lines([entry(np.zeros(3, bool))], study)
     assert "cannot tell" in few
     genie_only = {"lenses": {"defocus": {k: v for k, v in study["lenses"]["defocus"].items() if k != "marginal"}}}
     assert column.cell(honest, None)[0] != "not computed" and observer_columns(genie_only)[1].cell(honest, None)[0] == \
         "not computed"
-    (genie_line,) = bracket_lines([honest], genie_only, width_px=24)
+    (genie_line,) = bracket_lines([honest], genie_only)
     assert "genie ceiling" in genie_line
