@@ -158,8 +158,8 @@ def headline_html(entries: Sequence[Entry], study: Mapping[str, Any] | None = No
             + '<div class="first">' + (charts or {}).get(profile, "")
             + f'<table class="headline sortable" data-profile="{_e(profile)}"><thead><tr>'
             + "".join(_th(c) for c in columns) + "</tr></thead><tbody>" + "".join(lines) + "</tbody></table></div>"
-            + (f'<p class="apart"><strong>Shown apart</strong> (another version than this board\'s; in no takeaway, '
-               f"front, chart or finding until re-published): "
+            + ('<p class="apart"><strong>Shown apart</strong> (another version than this board\'s; in no takeaway, '
+               "front, chart or finding until re-published): "
                + ", ".join(f'<span title="{_e(a.reason)}">{_e(a.entry.lens)} ({_e(", ".join(a.fields))})</span>'
                            for a in others) + " differ; hover a lens for how.</p>" if others else "")
             + "</section>")

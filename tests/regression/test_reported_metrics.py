@@ -27,7 +27,7 @@ SKIP = {"fit_s", "images_per_s", "wall_s", "threads"}
 SKIP_SUFFIX = "_s_per_image"  # a reader's seconds per stage
 # Cheap attackers of the standard ensemble, which the entries are published with: the rerun names them
 # (the cross product among them), and only the chains the entry holds are compared.
-FAST_ATTACKS = ("wiener-known-psf", "richardson-lucy-known-psf", "lpdr-oracle", "learned-reader")
+FAST_ATTACKS = ("nafnet-known-psf", "lpdr", "learned-reader", "learned-reader-psf")
 
 
 def tolerance(stats: leaderboard.Stat) -> float:

@@ -95,6 +95,7 @@ def _git(repo: Path, *args: str) -> str:
     return subprocess.run(["git", *args], cwd=repo, check=True, capture_output=True, text=True).stdout.strip()
 
 
+@pytest.mark.slow  # runs git
 def test_a_stamped_code_version_is_the_digest_of_the_rows_commit(tmp_path):
     repo = tmp_path / "repo"
     for package in ("lenses", "attacks", "benchmark"):

@@ -56,7 +56,7 @@ def test_csv_carries_every_rows_own_interval(tmp_path, rows):
         for name in set(row.metrics) - set(row.intervals):
             if f"{name}_ci_low" in table.columns:
                 assert math.isnan(line[f"{name}_ci_low"])
-    assert checked > 100
+    assert checked > 40  # every row's intervals (66 on the entry of the standard ensemble)
 
 
 def test_markdown_shows_each_metric_with_its_interval(tmp_path, rows):
@@ -71,13 +71,13 @@ def test_markdown_shows_each_metric_with_its_interval(tmp_path, rows):
             if name in cells:
                 assert cells[name] == f"{fmt(row.metrics[name])} [{fmt(low)}, {fmt(high)}]"
                 shown += 1
-    assert shown > 25 and "95 % interval" in md
+    assert shown > 15 and "95 % interval" in md
 
 
 def test_markdown_interval_over_seeds_spans_every_seeds_interval(tmp_path, rows):
     _, md = written(tmp_path, rows)
-    cells = md_lines(md)[("defocus", "wiener-known-psf")]
-    mine = [r for r in rows if r.attack == "wiener-known-psf"]
+    cells = md_lines(md)[("defocus", "nafnet-known-psf")]
+    mine = [r for r in rows if r.attack == "nafnet-known-psf"]
     low = min(r.intervals["psnr_db"][0] for r in mine)
     high = max(r.intervals["psnr_db"][1] for r in mine)
     mean = sum(r.metrics["psnr_db"] for r in mine) / len(mine)
@@ -106,10 +106,8 @@ def test_chain_threat_model_is_the_strongest_of_its_parts(tmp_path, rows):
         assert labels[r.attack] == expected
         assert lines[(r.lens, r.attack)]["threat_model"] == expected
         assert set(table[table["attack"] == r.attack]["threat_model"]) == {expected}
-    # The entry holds the standard ensemble's chains: a lens-access restorer before the sensor-access lpdr, a
-    # known-pairs one before lpdr-oracle.
-    assert labels["richardson-lucy-known-psf>lpdr"] == "lens-access"
-    assert labels["nafnet-known-pairs>lpdr-oracle"] == "known-pairs"
+    # The entry holds the standard ensemble's chain: a lens-access restorer before the sensor-access lpdr.
+    assert labels["nafnet-known-psf>lpdr"] == "lens-access"
 
 
 def test_every_line_a_chart_draws_is_in_the_table(tmp_path, rows):
@@ -119,5 +117,5 @@ def test_every_line_a_chart_draws_is_in_the_table(tmp_path, rows):
     records = [{"lens": r.lens, "attack": r.attack, "width_px": 40.0, "correct": i < r.metrics["plate_acc"] * 2}
                for r in rows if r.ok and r.metric("n_plates") for i in range(int(r.metrics["n_plates"]))]
     charted = set(width_accuracy(records)) | set(restorer_points(rows))
-    assert ("defocus", "richardson-lucy-known-psf>lpdr") in charted
+    assert ("defocus", "nafnet-known-psf>lpdr") in charted
     assert charted - set(lines) == set()
