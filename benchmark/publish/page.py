@@ -22,7 +22,7 @@ from typing import Any
 from matplotlib.ticker import MaxNLocator
 
 from benchmark.store.cache import atomic_write_text
-from benchmark.results.charts.tradeoff import TradeoffPoint, pareto_front, tradeoff_points
+from benchmark.results.charts.tradeoff import PLATES_LABEL, PSNR_LABEL, TradeoffPoint, pareto_front, tradeoff_points
 from benchmark.results.entries import Entry, file_safe
 from benchmark.publish.tables import (CONVENTION, FINDINGS_HEAD, PRIVATE_LEVEL, Column, findings_lines,
                                       headline_columns, table_columns, takeaways)
@@ -304,9 +304,6 @@ def flags_html(flags: Sequence[Any]) -> str:
                    f"<td>{_e(f.message)}</td></tr>" for f in flags)
     return ("<table><thead><tr><th>lens</th><th>profile</th><th>flag</th><th>what</th></tr></thead>"
             f"<tbody>{rows}</tbody></table>")
-
-
-PLATES_LABEL, PSNR_LABEL = "plates read by the ensemble %", "ensemble PSNR dB"
 
 
 def _svg_figure(profile: str, points: Sequence[tuple[TradeoffPoint, str]], label: str, unit: str,

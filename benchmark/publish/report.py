@@ -17,7 +17,7 @@ from benchmark.store.cache import atomic_write_text
 from benchmark.results.charts import save_figure
 from benchmark.results.charts.attacker_speed import write_attacker_speed_chart
 from benchmark.publish.profile_chart import write_profile_chart
-from benchmark.results.charts.tradeoff import write_tradeoff_chart
+from benchmark.results.charts.tradeoff import PLATES_LABEL, PSNR_LABEL, write_tradeoff_chart
 from benchmark.results.entries import LEADERBOARD, Entry, display_order, load_entries, locked
 from benchmark.publish import board_files
 from benchmark.publish.page import write_page
@@ -76,10 +76,6 @@ def study_charts(directory: Path, charts: Path) -> list[Path]:
     if steps.is_file():
         written.append(write_nafnet_steps_chart(json.loads(steps.read_text()), charts / f"{steps.stem}.png"))
     return written
-
-
-PLATES_LABEL = "plates read by the ensemble % (from the readable width)"
-PSNR_LABEL = "ensemble PSNR dB (each scene at its best restorer)"
 
 
 def entry_charts(entries: list[Entry], charts: Path, study: dict | None = None) -> list[Path]:

@@ -442,21 +442,15 @@ def bracket_lines(entries: Sequence[Entry], study: Mapping[str, Any] | None) -> 
         which = {"marginal": "the tighter ceiling: an ideal observer that must find the plate",
                  "genie": "the genie ceiling: an ideal observer told where the plate is"}.get(
             bracket.ceiling_kind, "the tighter ceiling where the study tabulates the plate's width, else the genie's")
-        low, high = bracket.ceiling_interval[0] - a.interval[1], bracket.ceiling_interval[1] - a.interval[0]
+        low, high = bracket.interval
         points = f"{100 * GAP_ALARM:.0f} points"
         verdict = (f"the attackers are more than {points} below it: the suite overstates this lens's privacy"
                    if low > GAP_ALARM else f"the attackers are within {points} of it" if high < GAP_ALARM else
                    f"cannot tell whether the attackers are within {points} of it (too few plates)")
-        lines.append(f"- **{e.lens}** ({e.profile}, plates from {_from_width(e)} px): between {100 * a.value:.1f} % "
+        lines.append(f"- **{e.lens}** ({e.profile}, plates from {bracket.from_px:g} px): between {100 * a.value:.1f} % "
                      f"{_pct(a.interval)} read by the ensemble and {100 * bracket.ceiling:.1f} % "
                      f"{_pct(bracket.ceiling_interval)} read by the ideal observer ({which}); {verdict}.")
     return lines
-
-
-def _from_width(e: Entry) -> str:
-    """The width the entry's pooled plate figure starts at, in px."""
-    ensemble = plate_ensemble(e.rows)
-    return "?" if ensemble is None else f"{ensemble.min_width_px():g}"
 
 
 def _pct(interval: tuple[float, float]) -> str:

@@ -44,20 +44,16 @@ class Version:
             return value
         return "not stamped (run from uncommitted changes)" if value.startswith("commit ") else f"SHA-256 {value}"
 
-    def text(self) -> str:
-        return ", ".join(f"{name} {self.shown(name)}" for name in _FIELDS)
 
-
-
-def _differences(versions: Sequence[Version], board: Version) -> str:
-    """How `versions` differ from `board`, each field once: "code a / b, torch 2.15.0 (board: code c, torch 2.14.1)"."""
-    mine, theirs = [], []
-    for name in _FIELDS:
-        values = list(dict.fromkeys(v.shown(name) for v in versions if getattr(v, name) != getattr(board, name)))
-        if values:
-            mine.append(f"{name} {' / '.join(values)}")
-            theirs.append(f"{name} {board.shown(name)}")
-    return f"{', '.join(mine)} (board: {', '.join(theirs)})"
+def _differences(versions: Sequence[Version], board: Version, fields: Sequence[str]) -> str:
+    """How `versions` differ from `board` in `fields`, each field once: "code a / b, torch 2.15.0 (board: code c,
+    torch 2.14.1)"."""
+    mine = []
+    for name in fields:
+        values = dict.fromkeys(v.shown(name) for v in versions if getattr(v, name) != getattr(board, name))
+        mine.append(f"{name} {' / '.join(values)}")
+    theirs = ", ".join(f"{name} {board.shown(name)}" for name in fields)
+    return f"{', '.join(mine)} (board: {theirs})"
 
 
 def _torch(row: Row) -> str:
@@ -119,8 +115,8 @@ def board_split(entries: Sequence[Entry]) -> Board:
         if board is None or mine == [board]:
             current.append(e)
             continue
-        reason = (f"{len(mine)} versions in one entry; " if len(mine) > 1 else "") + _differences(mine, board)
         fields = tuple(f for f in _FIELDS if any(getattr(v, f) != getattr(board, f) for v in mine))
+        reason = (f"{len(mine)} versions in one entry; " if len(mine) > 1 else "") + _differences(mine, board, fields)
         apart.append(Apart(e, tuple(mine), reason, fields))
     return Board(current, apart, versions)
 

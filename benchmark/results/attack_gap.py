@@ -181,12 +181,19 @@ def gap_curves(study: Mapping[str, Any] | None, lens: str, spec: Mapping[str, An
 class Bracket:
     """An entry's pooled privacy between what its ensemble reads and what the ideal observer reads of the
     same readable plates (see the module docstring); ``ceiling_kind``: "marginal" when the tighter curve
-    gave every plate's ceiling, "genie" when it gave none, "mixed" otherwise."""
+    gave every plate's ceiling, "genie" when it gave none, "mixed" otherwise; ``from_px``: the width the
+    pooled figure starts at."""
 
     ensemble: Accuracy
     ceiling: float
     ceiling_interval: tuple[float, float]
     ceiling_kind: str
+    from_px: float
+
+    @property
+    def interval(self) -> tuple[float, float]:
+        """The gap's 95 % interval, as ``Gap.interval``: ceiling low - ensemble high, ceiling high - ensemble low."""
+        return self.ceiling_interval[0] - self.ensemble.interval[1], self.ceiling_interval[1] - self.ensemble.interval[0]
 
 
 def _ceiling_of_width(width_px: float, curve: CeilingCurve, fallback: CeilingCurve | None
@@ -216,7 +223,7 @@ def pooled_bracket(entry: Entry, study: Mapping[str, Any] | None, attacks: set[s
     kinds = {f[2] for f in found}  # type: ignore[index]
     return Bracket(ensemble.accuracy, float(np.mean([f[0] for f in found])),  # type: ignore[index]
                    (float(np.mean([f[1][0] for f in found])), float(np.mean([f[1][1] for f in found]))),  # type: ignore[index]
-                   kinds.pop() if len(kinds) == 1 else "mixed")
+                   kinds.pop() if len(kinds) == 1 else "mixed", ensemble.min_width_px())
 
 
 def entry_gaps(entry: Entry, study: Mapping[str, Any] | None, attacks: set[str] | None = None) -> list[Gap]:

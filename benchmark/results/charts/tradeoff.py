@@ -23,6 +23,9 @@ from benchmark.results.entries import Entry
 from benchmark.results.pooled import Pooled
 
 _MARKERS = "osD^v<>pP*Xh"
+# The x axes of the two trade-off charts, the PNGs' and the web page's alike.
+PLATES_LABEL = "plates read by the ensemble % (from the readable width)"
+PSNR_LABEL = "ensemble PSNR dB (each scene at its best restorer)"
 # Panel geometry in inches: the label column sits right of the axes, outside them.
 _LEFT_IN, _AXES_W_IN, _LABELS_W_IN = 0.85, 5.2, 2.3
 _TOP_IN, _BOTTOM_IN, _MIN_AXES_H_IN = 0.45, 0.65, 2.8
