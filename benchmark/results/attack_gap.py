@@ -198,15 +198,17 @@ class Bracket:
 
 def _ceiling_of_width(width_px: float, curve: CeilingCurve, fallback: CeilingCurve | None
                       ) -> tuple[float, tuple[float, float], str] | None:
-    for used in (curve, fallback):
-        if used is None:
-            continue
-        found = ceiling_at(used, width_px)
-        if found is None and width_px > float(used.widths_px.max()):
-            found = ceiling_at(used, float(used.widths_px.max()))
+    """The ceiling at `width_px` from `curve` where it tabulates the width, else from `fallback`; a width beyond
+    both counts at the widest width either tabulates (module docstring)."""
+    used = [c for c in (curve, fallback) if c is not None]
+    for c in used:
+        found = ceiling_at(c, width_px)
         if found is not None:
-            return found[0], found[1], used.kind
-    return None
+            return found[0], found[1], c.kind
+    widest = max(used, key=lambda c: float(c.widths_px.max()))
+    top = float(widest.widths_px.max())
+    found = ceiling_at(widest, top) if width_px > top else None
+    return None if found is None else (found[0], found[1], widest.kind)
 
 
 def pooled_bracket(entry: Entry, study: Mapping[str, Any] | None, attacks: set[str] | None = None

@@ -2,6 +2,7 @@
 (benchmark.results.attack_gap), and findings decided on the ensemble (benchmark.publish.findings), on
 constructed rows whose right answers are known."""
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -268,3 +269,16 @@ def test_pooled_bracket_is_the_mean_ceiling_over_the_same_readable_plates():
     assert pooled_bracket(entry, narrow) is None
     # No study record for the lens's spec: none either.
     assert pooled_bracket(make_entry("defocus", rows, {"name": PROFILE}, None, {"other": 1}), study) is None
+
+
+def test_a_width_the_tighter_curve_lacks_takes_the_genies_before_any_clamp():
+    from benchmark.results.attack_gap import _ceiling_of_width
+    from benchmark.results.observer.nuisance import NuisancePrior
+    genie = _curve()  # 16, 32, 64 px: 0.6, 0.9, 1.0
+    tighter = dataclasses.replace(_curve(widths=(16,), ceiling=(0.5,)), prior=NuisancePrior(),
+                                  width_high_px=np.array([32.0]))  # one bin, [16, 32)
+    assert _ceiling_of_width(20, tighter, genie)[::2] == (0.5, "marginal")
+    assert _ceiling_of_width(48, tighter, genie)[::2] == (pytest.approx(0.95), "genie")  # the genie tabulates 48
+    assert _ceiling_of_width(128, tighter, genie)[::2] == (1.0, "genie")  # beyond both: the genie's widest
+    assert _ceiling_of_width(128, tighter, None)[::2] == (0.5, "marginal")  # the tighter curve alone: its last bin
+    assert _ceiling_of_width(8, tighter, genie) is None
