@@ -34,7 +34,7 @@ from torch import Tensor
 
 from attacks.base import FitContext, FitReport, PlateRead, ReadHints, Reader, ThreatModel
 from common.plate_render import PLATE_FORMAT, format_alphabets, plate_font, render_plate
-from lenses.raw_likelihood import raw_mean_electrons
+from lenses.raw_likelihood import BoxBlur
 from lenses.sensor import bayer_masks
 
 __all__ = ["IdealObserverReader"]
@@ -184,7 +184,7 @@ class _Scorer:
                  weight: Tensor, channel: Tensor) -> None:
         self.cam, self.size, self.origin = cam, size, origin
         self.y, self.w, self.channel = observed, weight, channel
-        self.r = cam["psf"].shape[-1] // 2
+        self._blur = BoxBlur(cam["psf"], cam["electrons_per_unit"], (size[1], size[0]), origin)
         self._footprint: Tensor | None = None
 
     def score(self, texts: list[str], band: bool, chunk: int = 32) -> Tensor:
@@ -193,10 +193,7 @@ class _Scorer:
 
     def _blurred(self, radiance: Tensor) -> Tensor:
         """Electrons (N, P) over the box of patches (N, 3, h, w) on a black surround, in the box's Bayer phase."""
-        r, (w, h) = self.r, self.size
-        phase = (self.origin[0] - r, self.origin[1] - r)
-        means = raw_mean_electrons(radiance, 0.0, self.cam["psf"], self.cam["electrons_per_unit"], phase)
-        return means[:, r:r + h, r:r + w].reshape(radiance.shape[0], -1)
+        return self._blur(radiance).reshape(radiance.shape[0], -1)
 
     def _score(self, texts: list[str], band: bool) -> Tensor:
         w, h = self.size
