@@ -1,0 +1,64 @@
+"""The ideal-observer reader's candidate blur: the box blur against the whole linear convolution it replaced.
+
+Run with `pytest tests/speed/test_ideal_observer_speed.py --benchmark-only`. Both score the same candidate
+plates at boxes of the quick profile's readable widths through the gp lens (PSF 87 x 87), alternating in
+the same rounds. The reads agree (tests/lenses/test_raw_likelihood.py checks the blur to 1e-10; on 9 quick
+os-d-1000 plate windows both read the same strings, 37.7 s -> 10.6 s on the 2-core machine, 2026-12-05).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+import attacks
+import lenses
+from attacks.readers import ideal_observer_reader as io
+from common.plate_render import random_plate_text
+from lenses.raw_likelihood import raw_mean_electrons
+
+from alternating import best_seconds
+
+# Measured on the 2-core AMD EPYC (quiet, 2026-12-05): 3.7x here; the whole search on three plates 3.9x.
+TARGET_SPEEDUP = 2.5
+BOXES = [(10, 20, 58, 30), (91, 41, 155, 55), (170, 60, 250, 77)]  # 48, 64 and 80 px wide
+
+
+def whole_transform_blur(self: io._Scorer, radiance: torch.Tensor) -> torch.Tensor:
+    """The scorer's blur before the box blur: the whole linear convolution, then the box cut out of it."""
+    r, (w, h) = self.cam["psf"].shape[-1] // 2, self.size
+    phase = (self.origin[0] - r, self.origin[1] - r)
+    means = raw_mean_electrons(radiance, 0.0, self.cam["psf"], self.cam["electrons_per_unit"], phase)
+    return means[:, r:r + h, r:r + w].reshape(radiance.shape[0], -1)
+
+
+@pytest.mark.benchmark(group="ideal-observer")
+def test_box_blur_scores_candidates_faster(benchmark, monkeypatch):
+    reader = attacks.load("ideal-observer")
+    reader.fit(attacks.FitContext(lens=lenses.load("gp")))
+    rng = np.random.default_rng(0)
+    texts = [random_plate_text(rng) for _ in range(64)]
+    electrons = 400 + 50 * torch.rand(96, 256, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    scorers = []
+    for x0, y0, x1, y1 in BOXES:
+        observed = electrons[y0:y1, x0:x1].reshape(-1)
+        channel = torch.zeros(observed.numel(), dtype=torch.long)
+        channel[::2], channel[1::4] = 1, 2
+        scorers.append(io._Scorer(reader._camera, (x1 - x0, y1 - y0), (y0, x0), observed, 1 / observed, channel))
+    box_blur = io._Scorer._blurred
+
+    def run(blur):
+        def go():
+            monkeypatch.setattr(io._Scorer, "_blurred", blur)
+            return [s.score(texts, True) for s in scorers]
+        return go
+
+    new, old = run(box_blur)(), run(whole_transform_blur)()
+    for a, b in zip(new, old):
+        torch.testing.assert_close(a, b, rtol=1e-9, atol=1e-6)
+    best = best_seconds({"whole": run(whole_transform_blur), "box": run(box_blur)}, 3)
+    benchmark.pedantic(run(box_blur), rounds=1, iterations=1, warmup_rounds=0)
+    speedup = best["whole"] / best["box"]
+    benchmark.extra_info.update({"speedup": speedup, "threads": torch.get_num_threads()})
+    assert speedup >= TARGET_SPEEDUP, f"box blur: {speedup:.2f}x the whole transform"
