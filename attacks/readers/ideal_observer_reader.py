@@ -21,7 +21,9 @@ strings are kept; sweeps repeat until a whole sweep leaves the best string uncha
 `max_sweeps`). The search runs from three starts (narrow, medium and wide glyphs everywhere, i.e.
 three layouts) and the best string found wins: one start alone gets caught where fixing one glyph
 moves all the others. Whether the plate has the EU band is decided first, by the best likelihood of
-the starting strings with and without it. Cost: about 3 x beam x 134 renderings per sweep.
+the starting strings with and without it. Cost: about 3 x beam x 134 renderings per sweep. The default
+search (beam 6, at most 6 sweeps) reads more plates than beam 3 with 4 sweeps on the same plates, at about
+twice the seconds (leaderboard/studies/ideal_observer_beam.json, benchmark.studies.observer_beam_study).
 """
 
 from __future__ import annotations
@@ -59,7 +61,7 @@ class IdealObserverReader(Reader):
     # plates no other chain read (benchmark.runner.cascade); --attack ideal-observer reads every plate.
     run_by_default: ClassVar[bool] = False
 
-    def __init__(self, beam: int = 3, max_sweeps: int = 4, min_width_px: int = 8) -> None:
+    def __init__(self, beam: int = 6, max_sweeps: int = 6, min_width_px: int = 8) -> None:
         if beam < 1 or max_sweeps < 1:
             raise ValueError(f"beam and max_sweeps must be >= 1, got {beam}, {max_sweeps}")
         self.beam = beam
