@@ -14,6 +14,7 @@ agree, which proves the pairing; a mismatch is reported, not paired).
   mean PSNR on the same scenes.
 - Costs: each attacker's fit seconds (and the cascade's), as its row measured them; the run's command and
   wall seconds; the load average when the study ran (the run's own load is not recorded).
+- Against an earlier run of the lens (``--baseline``): the same paired comparisons, run against run.
 - Chains: what each chain of the run decides and its removal effect (``benchmark.results.ensemble_choice``)
   and the run's commit and date. Once the record holds runs of all five ``PRIVACY_LENSES`` (``--run`` is
   repeatable), the rule's proposal on them (``proposal``): the chains it keeps and drops, and what dropping
@@ -138,6 +139,16 @@ def pair_lens(run_rows: list[Row], lens: str, seed: int, study: dict[str, Any] |
                         for r in ours if r.ok and any(k in r.metrics for k in SECONDS)}}
 
 
+def against(ours: list[Row], folder: Path, theirs: list[Row], seed: int, study: dict[str, Any] | None,
+            lens: str) -> dict[str, Any]:
+    """`ours` (one lens and seed of a run) paired against an earlier run's rows of that lens and seed, as
+    against the entry: plates from FROM_PX px and the ensemble PSNR (``run`` is ours, ``entry`` the earlier)."""
+    spec = read_entry(LEADERBOARD / "entries" / entry_name(lens, "quick", "synthetic")).lens_spec
+    plates, scenes = _plates(ours, theirs, seed, study, lens, spec), _scenes(ours, theirs, seed)
+    return {"folder": str(folder), "plates_from_px": plates.get(f"from_{FROM_PX}px", plates.get("why")),
+            "scenes": {k: v for k, v in scenes.items() if k != "run_restorers_db"}}
+
+
 def proposal(record: dict[str, Any], runs: dict[str, list[Row]]) -> dict[str, Any]:
     """The rule of ``benchmark.results.ensemble_choice`` applied to the fresh runs' chain effects of the
     privacy lenses (``PRIVACY_LENSES``, as far as the record holds them): the chains it keeps plus the paper's
@@ -168,7 +179,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--lens", action="append", default=None, help="lens (repeatable; default: every lens of the runs)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("--baseline", type=Path, action="append", default=[],
+                        help="an earlier run's folder: each lens it holds is also paired against it, the same way "
+                             "(`against_baseline`: what changed between two runs of one lens); repeatable")
     args = parser.parse_args(argv)
+    baselines = {}
+    for folder in args.baseline:
+        rows = Results.from_json(json.loads((folder / "results.json").read_text())).rows
+        baselines.update({lens: (folder, [r for r in rows if r.lens == lens and r.seed == args.seed])
+                          for lens in {r.lens for r in rows}})
     study_path = LEADERBOARD / "studies" / "ideal_observer.json"
     observer = json.loads(study_path.read_text()) if study_path.exists() else None
     record: dict[str, Any] = json.loads(args.out.read_text()) if args.out.exists() else {}
@@ -188,6 +207,8 @@ def main(argv: list[str] | None = None) -> int:
             pairing = pair_lens(results.rows, lens, args.seed, observer)
             pairing["run"] = {"folder": str(folder), "command": results.meta.get("command"),
                               "wall_s": results.meta.get("wall_s")}
+            if lens in baselines:
+                pairing["against_baseline"] = against(runs[lens], *baselines[lens], args.seed, observer, lens)
             record["lenses"][lens] = pairing
             p, s = pairing["plates"], pairing["scenes"]
             line = f"{lens}: "

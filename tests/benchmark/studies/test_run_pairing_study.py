@@ -30,8 +30,14 @@ def test_an_entry_paired_with_itself_differs_by_nothing(tmp_path):
     (tmp_path / "run").mkdir()
     (tmp_path / "run" / "results.json").write_text(json.dumps(Results(rows, gp.settings).to_json()))
     out = tmp_path / "pairing.json"
-    assert run_pairing_study.main(["--run", str(tmp_path / "run"), "--lens", "gp", "--out", str(out)]) == 0
-    assert json.loads(out.read_text())["lenses"]["gp"]["plates"]["paired"]
+    assert run_pairing_study.main(["--run", str(tmp_path / "run"), "--lens", "gp", "--out", str(out),
+                                   "--baseline", str(tmp_path / "run")]) == 0
+    written = json.loads(out.read_text())["lenses"]["gp"]
+    assert written["plates"]["paired"]
+    # Against a baseline run: the same comparison, run against run; the run against itself differs by nothing.
+    against = written["against_baseline"]
+    assert against["plates_from_px"]["run - entry"]["difference"] == 0.0
+    assert against["scenes"]["run - entry"]["difference"] == 0.0 and "run_restorers_db" not in against["scenes"]
 
 
 def test_a_run_with_other_plates_is_reported_not_paired():
