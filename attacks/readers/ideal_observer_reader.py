@@ -19,11 +19,14 @@ beam search over whole strings, in sweeps over the positions: at each position e
 substituted into each beam string and scored with its exact full rendering, and the `beam` best
 strings are kept; sweeps repeat until a whole sweep leaves the best string unchanged (at most
 `max_sweeps`). The search runs from three starts (narrow, medium and wide glyphs everywhere, i.e.
-three layouts) and the best string found wins: one start alone gets caught where fixing one glyph
-moves all the others. Whether the plate has the EU band is decided first, by the best likelihood of
-the starting strings with and without it. Cost: about 3 x beam x 134 renderings per sweep. The default
-search (beam 6, at most 6 sweeps) reads more plates than beam 3 with 4 sweeps on the same plates, at about
-twice the seconds (leaderboard/studies/ideal_observer_beam.json, benchmark.studies.observer_beam_study).
+three layouts), from each with every beam width of `beams` in turn, and the best string found wins: one
+start alone gets caught where fixing one glyph moves all the others, and a wider beam is not a wider
+search (its sweeps take other paths: on a clean test plate beam 6 stopped at a string far less likely
+than the true one, which beams 3, 4 and 8 found); the strings are scored once and shared, so the widths
+together find a string at least as likely as each width alone. Whether the plate has the EU band is decided first, by the best likelihood of
+the starting strings with and without it. Cost: about 3 x beam x 134 renderings per sweep and width. The
+default search (beams 3 then 6, at most 6 sweeps) against beam 3 with 4 sweeps on the same plates, and what
+each costs: leaderboard/studies/ideal_observer_beam.json (benchmark.studies.observer_beam_study).
 """
 
 from __future__ import annotations
@@ -48,8 +51,8 @@ class IdealObserverReader(Reader):
     """Maximum-likelihood plate reader with the lens, the font and the true plate boxes (module docstring).
 
     Args:
-        beam: strings kept per round of the beam search (1: coordinate ascent).
-        max_sweeps: at most this many sweeps over the positions.
+        beams: the beam widths searched in turn from each start (strings kept per round; 1: coordinate ascent).
+        max_sweeps: at most this many sweeps over the positions, per width and start.
         min_width_px: narrower boxes are not read (nothing to read, and the runner scores none).
     """
 
@@ -61,10 +64,10 @@ class IdealObserverReader(Reader):
     # plates no other chain read (benchmark.runner.cascade); --attack ideal-observer reads every plate.
     run_by_default: ClassVar[bool] = False
 
-    def __init__(self, beam: int = 6, max_sweeps: int = 6, min_width_px: int = 8) -> None:
-        if beam < 1 or max_sweeps < 1:
-            raise ValueError(f"beam and max_sweeps must be >= 1, got {beam}, {max_sweeps}")
-        self.beam = beam
+    def __init__(self, beams: tuple[int, ...] = (3, 6), max_sweeps: int = 6, min_width_px: int = 8) -> None:
+        if not beams or min(beams) < 1 or max_sweeps < 1:
+            raise ValueError(f"beams (one width or more) and max_sweeps must be >= 1, got {beams}, {max_sweeps}")
+        self.beams = tuple(int(b) for b in beams)
         self.max_sweeps = max_sweeps
         self.min_width_px = min_width_px
         self.plate_format = PLATE_FORMAT
@@ -96,7 +99,7 @@ class IdealObserverReader(Reader):
         return FitReport()
 
     def describe(self) -> dict[str, Any]:
-        return {**super().describe(), "beam": self.beam, "max_sweeps": self.max_sweeps,
+        return {**super().describe(), "beams": list(self.beams), "max_sweeps": self.max_sweeps,
                 "min_width_px": self.min_width_px, "plate_format": self.plate_format}
 
     def read(self, images: Tensor, hints: ReadHints | None = None) -> list[list[PlateRead]]:
@@ -146,13 +149,15 @@ class IdealObserverReader(Reader):
         starts = _starting_strings(alphabets)
         band = bool(scorer.score(starts, True).max() > scorer.score(starts, False).max())
         for start in starts:
-            self._search(scorer, alphabets, start, band, seen)
+            for beam in self.beams:
+                self._search(scorer, alphabets, start, band, seen, beam)
         best = max(seen, key=seen.__getitem__)
         values = torch.tensor(list(seen.values()), dtype=torch.float64)
         return best, float(torch.softmax(values, 0).max())
 
-    def _search(self, scorer: _Scorer, alphabets: list[str], start: str, band: bool, seen: dict[str, float]) -> None:
-        """Beam sweeps from `start` (module docstring); every scored string lands in `seen`."""
+    def _search(self, scorer: _Scorer, alphabets: list[str], start: str, band: bool, seen: dict[str, float],
+                width: int) -> None:
+        """Beam sweeps of `width` strings from `start` (module docstring); every scored string lands in `seen`."""
         if start not in seen:
             seen[start] = float(scorer.score([start], band)[0])
         beam = [start]
@@ -163,7 +168,7 @@ class IdealObserverReader(Reader):
                 fresh = [s for s in pool if s not in seen]
                 if fresh:
                     seen.update(zip(fresh, scorer.score(fresh, band).tolist()))
-                beam = sorted(pool, key=seen.__getitem__, reverse=True)[:self.beam]
+                beam = sorted(pool, key=seen.__getitem__, reverse=True)[:width]
             if beam[0] == best_before:
                 break
 

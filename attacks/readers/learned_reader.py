@@ -41,6 +41,7 @@ from attacks.training.reader_family_training import lens_camera
 from common.plate_render import PLATE_FORMAT, format_alphabets
 from attacks.readers.plates.plate_sim import plate_crops
 from attacks.training.restorer_training import lens_key
+from attacks.training.fit_code import versioned_key
 from attacks.training.shipped_weights import Shipped, find_shipped, key_text
 
 __all__ = ["BUDGETS", "PRETRAIN_BUDGET", "LearnedReader", "pack_weights", "pretrain", "pretrained_key", "start_budget",
@@ -87,8 +88,8 @@ _CURVE = "__fit_curve__"  # the fit's curve rides in the cached weights file as 
 
 def pretrained_key(fmt: str, seed: int = 0) -> dict[str, Any]:
     """The key the pre-trained weights are shipped (and looked up) under."""
-    return {"attack": LearnedReader.name, "stage": "pretrained-sharp", "format": fmt, "width": WIDTH,
-            "budget": PRETRAIN_BUDGET.to_dict(), "seed": seed}
+    return versioned_key(LearnedReader.name, {"attack": LearnedReader.name, "stage": "pretrained-sharp", "format": fmt,
+                                              "width": WIDTH, "budget": PRETRAIN_BUDGET.to_dict(), "seed": seed})
 
 
 def start_budget(profile: str) -> ReaderBudget:
@@ -129,6 +130,7 @@ class LearnedReader(Reader):
     """
 
     name: ClassVar[str] = "learned-reader"
+    fit_code: ClassVar[str] = "learned-reader"  # whose code version keys its fits (attacks.training.fit_code)
     hints: ClassVar[frozenset[str]] = frozenset({"plate_boxes"})
     threat_model: ClassVar[ThreatModel] = ThreatModel.LENS_ACCESS
     learns: ClassVar[bool] = True
@@ -186,6 +188,7 @@ class LearnedReader(Reader):
         key = {"attack": self.name, "budget": self.budget.to_dict(), "lens": lens_key(lens), "format": self.plate_format,
                "start": start, "seed": seed, "keeps": "best-evaluation",
                **({"support_energy": support} if support is not None else {})}
+        key = versioned_key(self.fit_code, key)
         self.fit_key = key
         data = None if ctx.artifacts is None else ctx.artifacts.load(self.name, key)
         if data is None and self.use_shipped_fit:  # e.g. the shipped gp lens's fit (``ship-lens``)

@@ -39,6 +39,7 @@ from attacks.training.lens_family import LensFamily
 from attacks.training.plate_reader_training import ReaderBudget
 from attacks.training.psf_restorer_training import psf_inputs
 from attacks.training.reader_family_training import FAMILY_BUDGET
+from attacks.training.fit_code import versioned_key
 from attacks.training.shipped_weights import Shipped, find_shipped
 from attacks.networks.plate_cnn import PlateCNN
 
@@ -64,13 +65,14 @@ def family_key(fmt: str, seed: int = 0, reads: str = "sensor") -> dict[str, Any]
     key = {"attack": LearnedReaderPSF.name if reads == "wiener" else LearnedReader.name, "stage": "pretrained-family",
            "format": fmt, "width": WIDTH, "budget": FAMILY_BUDGET.to_dict(), "family": LensFamily().describe(),
            "start": pretrained_key(fmt, seed), "seed": seed}
-    return {**key, "reads": reads} if reads == "wiener" else key
+    return versioned_key(key["attack"], {**key, "reads": reads} if reads == "wiener" else key)
 
 
 class LearnedReaderPSF(LearnedReader):
     """Reads the Wiener estimate of each image with the sharp-plate reader (module docs)."""
 
     name: ClassVar[str] = "learned-reader-psf"
+    fit_code: ClassVar[str] = "learned-reader-psf"
     threat_model: ClassVar[ThreatModel] = ThreatModel.LENS_ACCESS
     learns: ClassVar[bool] = True  # its network is trained (on sharp plates, once), not per lens
     requires: ClassVar[frozenset[str]] = frozenset()

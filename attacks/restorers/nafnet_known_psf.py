@@ -42,6 +42,7 @@ from attacks.training.psf_restorer_training import (
     psf_inputs,
 )
 from attacks.training.restorer_training import collect_pairs, data_identity
+from attacks.training.fit_code import versioned_key
 from attacks.training.shipped_weights import Shipped, find_shipped
 
 __all__ = ["SHIPPED_SCENES", "NafnetKnownPSF", "load_cached", "pack", "restore_known_psf", "shipped_key", "unpack"]
@@ -58,8 +59,9 @@ PRETRAIN_SEED = 0
 
 def shipped_key(budget: PsfPretrainBudget, data: Any = None) -> dict[str, Any]:
     """The key the pre-training is cached and shipped under: budget, family, training scenes, seed."""
-    return {"attack": NafnetKnownPSF.name, "budget": budget.to_dict(), "family": LensFamily().describe(),
-            "data": SHIPPED_SCENES if data is None else data, "seed": PRETRAIN_SEED}
+    return versioned_key(NafnetKnownPSF.name, {"attack": NafnetKnownPSF.name, "budget": budget.to_dict(),
+                                               "family": LensFamily().describe(),
+                                               "data": SHIPPED_SCENES if data is None else data, "seed": PRETRAIN_SEED})
 
 
 def pack(net: NAFNet, curve: PretrainCurve) -> bytes:

@@ -37,7 +37,7 @@ log = logging.getLogger(__name__)
 
 OPEN_BIN_BELOW = 0.7  # a bin where the chains before read this share or more is left to them
 # Plates a cascade reader is given per lens and seed, by profile: the ideal-observer reader takes about
-# 2 s a plate on 2 cores (leaderboard/studies/ideal_observer_beam.json).
+# 2-3 s a plate on 2 cores (leaderboard/studies/ideal_observer_beam.json).
 PLATES_PER_LENS = {"smoke": 0, "quick": 60, "paper": 400}  # smoke: the row, not the cost
 DEFAULT_PLATES = 60
 

@@ -1,8 +1,9 @@
 """The `ideal-observer` reader's search width: how many more plates a wider beam reads, and what it costs.
 
-The reader's beam search (attacks.readers.ideal_observer_reader) keeps `beam` strings per position and
-sweeps at most `max_sweeps` times; a wider search finds a string of higher likelihood where a narrow one
-stops at a local optimum (under a wide PSF every glyph's position depends on all the others). Each setting
+The reader's beam search (attacks.readers.ideal_observer_reader) keeps a beam of strings per position and
+sweeps at most `max_sweeps` times, from each start with each of its beam widths in turn; a wider search finds
+a string of higher likelihood where a narrow one stops at a local optimum (under a wide PSF every glyph's
+position depends on all the others), yet one wider beam alone takes other paths, not more of them. Each setting
 reads the same plates: the quick profile's plate windows of seed 0 (`benchmark.runner.tasks.plate_set`, the
 run's noise) whose widest scored plate lies in the width range asked, through the lens built from its quick
 leaderboard entry. Per lens and range: plates read by each setting, the paired difference (McNemar's exact
@@ -31,14 +32,15 @@ from benchmark.store.profiles import get_profile
 from benchmark.studies.observer_study import REPO, quick_lenses
 
 OUT_JSON = REPO / "leaderboard" / "studies" / "ideal_observer_beam.json"
-SETTINGS = {"beam 3, 4 sweeps": (3, 4), "beam 6, 6 sweeps": (6, 6)}
+SETTINGS = {"beam 3, 4 sweeps": ((3,), 4), "beam 6, 6 sweeps": ((6,), 6), "beams 3 then 6, 6 sweeps": ((3, 6), 6)}
 # The width ranges where the cascade reads on the blurring lenses (the bins the other chains leave open).
 CASES = (("os-d-1000", 48, 64), ("os-d-1000", 64, 96), ("gp", 32, 48), ("defocus", 48, 64))
 
 log = logging.getLogger(__name__)
 
 
-def read_case(lens_name: str, low: float, high: float, n_plates: int, settings: dict[str, tuple[int, int]]) -> dict:
+def read_case(lens_name: str, low: float, high: float, n_plates: int,
+              settings: dict[str, tuple[tuple[int, ...], int]]) -> dict:
     """Every setting's per-plate outcomes on the plate windows of `lens_name` in [low, high) px (module docstring)."""
     profile = dataclasses.replace(get_profile("quick"), plates_per_width_bin=n_plates, plates_per_wide_bin=n_plates)
     cfg = RunConfig(lenses=[lens_name], attacks=["ideal-observer"], scenes="synthetic", profile=profile, seeds=[0],
@@ -50,15 +52,15 @@ def read_case(lens_name: str, low: float, high: float, n_plates: int, settings: 
     keep = [i for i, s in enumerate(plates.scenes)
             if low <= max(p.box_xyxy[2] - p.box_xyxy[0] for p in s.plates) < high]
     out: dict = {"lens": lens_name, "low_px": low, "high_px": high, "settings": {}}
-    for label, (beam, sweeps) in settings.items():
-        reader = IdealObserverReader(beam=beam, max_sweeps=sweeps)
+    for label, (beams, sweeps) in settings.items():
+        reader = IdealObserverReader(beams=beams, max_sweeps=sweeps)
         reader.fit(fit_context(lens, cfg, 0, None))
         t0 = time.perf_counter()
         outcomes, _, _ = read_plates(reader, [plates.sensor[i] for i in keep], [plates.scenes[i] for i in keep],
                                      cfg.profile.batch_size, cfg.device)
         seconds = time.perf_counter() - t0
         chosen = [o for o in outcomes if low <= o.width_px < high]
-        out["settings"][label] = {"beam": beam, "max_sweeps": sweeps, "read": sum(o.correct for o in chosen),
+        out["settings"][label] = {"beams": list(beams), "max_sweeps": sweeps, "read": sum(o.correct for o in chosen),
                                   "plates": len(chosen), "s_per_plate": round(seconds / max(len(outcomes), 1), 2),
                                   "load_average": round(os.getloadavg()[0], 2),
                                   "correct": [bool(o.correct) for o in chosen], "truth": [o.truth for o in chosen]}
@@ -79,17 +81,20 @@ def paired(case: dict, a: str, b: str) -> dict:
 
 
 def run_study(cases=CASES, n_plates: int = 25, settings=SETTINGS, out_json: Path | None = OUT_JSON) -> dict:
-    """Read every case with every setting; the pooled paired comparison of the last setting against the first."""
+    """Read every case with every setting; per case and pooled, the paired comparison of the last setting (the
+    reader's default) against the first and against each other one (`paired_with`)."""
     labels = list(settings)
     record: dict = {"profile": "quick", "seed": 0, "n_plates_target": n_plates, "cases": []}
     for lens_name, low, high in cases:  # written after each case: an interrupted study keeps what it read
         case = read_case(lens_name, low, high, n_plates, settings)
         case["paired"] = paired(case, labels[-1], labels[0])
+        case["paired_with"] = {b: paired(case, labels[-1], b) for b in labels[1:-1]}
         record["cases"].append(case)
         pooled = {"lens": "all", "low_px": None, "high_px": None, "settings": {
             label: {"correct": [c for k in record["cases"] for c in k["settings"][label]["correct"]]}
             for label in labels}}
         record["pooled"] = paired(pooled, labels[-1], labels[0])
+        record["pooled_with"] = {b: paired(pooled, labels[-1], b) for b in labels[1:-1]}
         if out_json is not None:
             out_json.parent.mkdir(parents=True, exist_ok=True)
             out_json.write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
@@ -111,9 +116,9 @@ def main(argv: list[str] | None = None) -> dict:
     if unknown:
         parser.error(f"--case: unknown lens {unknown}; valid: {sorted(quick_lenses())}")
     record = run_study(cases, args.plates, out_json=args.out)
-    p = record["pooled"]
-    print(f"{p['a']} against {p['b']}: +{p['gained']} / -{p['lost']} plates, {100 * p['difference']:+.1f} pt "
-          f"[{100 * p['interval'][0]:+.1f}, {100 * p['interval'][1]:+.1f}], p = {p['p_value']:.3g}")
+    for p in (record["pooled"], *record["pooled_with"].values()):
+        print(f"{p['a']} against {p['b']}: +{p['gained']} / -{p['lost']} plates, {100 * p['difference']:+.1f} pt "
+              f"[{100 * p['interval'][0]:+.1f}, {100 * p['interval'][1]:+.1f}], p = {p['p_value']:.3g}")
     return record
 
 

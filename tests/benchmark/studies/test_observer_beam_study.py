@@ -27,6 +27,6 @@ def test_the_record_backs_the_readers_default_search():
     reader = IdealObserverReader()
     wide = record["pooled"]["a"]
     settings = record["cases"][0]["settings"][wide]
-    assert (settings["beam"], settings["max_sweeps"]) == (reader.beam, reader.max_sweeps)
+    assert (tuple(settings["beams"]), settings["max_sweeps"]) == (reader.beams, reader.max_sweeps)
     assert record["pooled"]["gained"] > record["pooled"]["lost"]
     assert record["pooled"]["p_value"] < 0.05
