@@ -62,10 +62,11 @@ def family_key(fmt: str, seed: int = 0, reads: str = "sensor") -> dict[str, Any]
     """The key a learned reader's family pre-training is shipped (and looked up) under; it continues the
     sharp start. ``reads="wiener"``: ``learned-reader-psf``'s, on Wiener estimates; "sensor":
     ``learned-reader``'s, on the sensor image (``python -m benchmark pretrain-attacker learned-reader --family``)."""
-    key = {"attack": LearnedReaderPSF.name if reads == "wiener" else LearnedReader.name, "stage": "pretrained-family",
+    attack = LearnedReaderPSF.name if reads == "wiener" else LearnedReader.name
+    key = {"attack": attack, "stage": "pretrained-family",
            "format": fmt, "width": WIDTH, "budget": FAMILY_BUDGET.to_dict(), "family": LensFamily().describe(),
            "start": pretrained_key(fmt, seed), "seed": seed}
-    return versioned_key(key["attack"], {**key, "reads": reads} if reads == "wiener" else key)
+    return versioned_key(attack, {**key, "reads": reads} if reads == "wiener" else key)
 
 
 class LearnedReaderPSF(LearnedReader):

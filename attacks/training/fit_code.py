@@ -33,7 +33,7 @@ FIT_CODE: dict[str, FitCode] = {
     "learned-reader": FitCode("attacks.readers.learned_reader", 1,
                               "5f48f18d2eb401d487a3728256d0a970abb55e56fd78b8011d3e2449e30bf97c"),
     "learned-reader-psf": FitCode("attacks.readers.learned_reader_psf", 1,
-                                  "71a42b3c1610a916c1f2bb40c16e13fec2f9638c8e2c5fda8832434ec52171e1"),
+                                  "5d7421b9b52689ade6686f45ba4d0aa44d7f7fcb1594347809bd5fd631f96301"),
     "nafnet-known-psf": FitCode("attacks.restorers.nafnet_known_psf", 1,
                                 "453662cd035a00b5d3ea9d433821c771d10893182ef1741f82fd3b93af07f8e0"),
 }
