@@ -253,7 +253,7 @@ def _compare_plates(ea: Entry, eb: Entry) -> tuple[stats.Comparison, Figure, Fig
         order = [i for i, n in enumerate(pa.names) if n in common]
         ra = pa.ensemble[order]
         rb = pb.ensemble[[where_b[pa.names[i]] for i in order]]
-        cells += [int(np.sum(ra & rb)), int(np.sum(ra & ~rb)), int(np.sum(~ra & rb)), int(np.sum(~ra & ~rb))]
+        cells += stats.paired_table(ra, rb)
     if cells.sum() == 0:
         raise _Unpaired("cannot tell: no readable plate was scored on both lenses")
     label = f"ensemble of {len(attacks)} chains"

@@ -342,7 +342,7 @@ def _reader_comparison(rows: Sequence[Row], a: str, b: str) -> stats.Comparison 
         if set(p.chains) != {a, b} or not p.names:
             continue
         ra, rb = p.read[p.chains.index(a)], p.read[p.chains.index(b)]
-        cells += [int(np.sum(ra & rb)), int(np.sum(ra & ~rb)), int(np.sum(~ra & rb)), int(np.sum(~ra & ~rb))]
+        cells += stats.paired_table(ra, rb)
     return None if cells.sum() == 0 else stats.paired_accuracy_difference(*(int(c) for c in cells))
 
 

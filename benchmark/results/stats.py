@@ -42,6 +42,7 @@ __all__ = [
     "mcnemar_exact",
     "paired_accuracy_difference",
     "paired_bootstrap",
+    "paired_table",
     "stratified_bootstrap_mean_interval",
     "stratified_paired_bootstrap",
     "verdict",
@@ -313,6 +314,15 @@ def mcnemar_exact(b: int, c: int) -> float:
     if b + c == 0:
         return 1.0
     return float(sps.binomtest(int(b), int(b + c), 0.5).pvalue)
+
+
+def paired_table(a: Sequence[bool] | np.ndarray, b: Sequence[bool] | np.ndarray) -> np.ndarray:
+    """The paired 2 x 2 table of two binary outcomes on the same units, as ``paired_accuracy_difference``
+    takes it: (both right, right under A only, right under B only, neither), int counts."""
+    ra, rb = np.asarray(a, dtype=bool), np.asarray(b, dtype=bool)
+    if ra.shape != rb.shape:
+        raise ValueError(f"paired outcomes need one value per unit under each; got shapes {ra.shape} and {rb.shape}")
+    return np.array([np.sum(ra & rb), np.sum(ra & ~rb), np.sum(~ra & rb), np.sum(~ra & ~rb)], dtype=int)
 
 
 def paired_accuracy_difference(both: int, only_a: int, only_b: int, neither: int,

@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 
 from attacks.readers.ideal_observer_reader import IdealObserverReader
-from benchmark.results.stats import paired_accuracy_difference
+from benchmark.results.stats import paired_accuracy_difference, paired_table
 from benchmark.runner.config import RunConfig
 from benchmark.runner.evaluation import read_plates
 from benchmark.runner.tasks import fit_context, plate_set
@@ -71,12 +71,9 @@ def read_case(lens_name: str, low: float, high: float, n_plates: int,
 
 def paired(case: dict, a: str, b: str) -> dict:
     """Setting `a` against `b` on the same plates: the difference of plates read, its interval and p."""
-    ca, cb = case["settings"][a]["correct"], case["settings"][b]["correct"]
-    both = sum(x and y for x, y in zip(ca, cb))
-    only_a = sum(x and not y for x, y in zip(ca, cb))
-    only_b = sum(y and not x for x, y in zip(ca, cb))
-    comparison = paired_accuracy_difference(both, only_a, only_b, len(ca) - both - only_a - only_b)
-    return {"a": a, "b": b, "gained": only_a, "lost": only_b, "difference": round(comparison.difference, 4),
+    table = paired_table(case["settings"][a]["correct"], case["settings"][b]["correct"])
+    comparison = paired_accuracy_difference(*(int(c) for c in table))
+    return {"a": a, "b": b, "gained": int(table[1]), "lost": int(table[2]), "difference": round(comparison.difference, 4),
             "interval": [round(comparison.low, 4), round(comparison.high, 4)], "p_value": comparison.p_value}
 
 

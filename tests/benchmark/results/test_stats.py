@@ -88,6 +88,16 @@ def test_mcnemar_exact_hand_computed_and_scipy():
         assert stats.mcnemar_exact(b, c) == pytest.approx(sps.binomtest(b, b + c, 0.5).pvalue)
 
 
+def test_paired_table_counts_against_scipys_crosstab():
+    rng = np.random.default_rng(3)
+    a, b = rng.random(200) < 0.6, rng.random(200) < 0.3
+    table = sps.contingency.crosstab(a, b).count  # rows: a False, True; columns: b False, True
+    assert stats.paired_table(a, b).tolist() == [table[1, 1], table[1, 0], table[0, 1], table[0, 0]]
+    assert stats.paired_table([True, False], [True, True]).tolist() == [1, 0, 1, 0]
+    with pytest.raises(ValueError, match="one value per unit"):
+        stats.paired_table([True], [True, False])
+
+
 def test_paired_accuracy_difference_square_and_add_when_uncorrelated():
     # ad - bc = 0 (phi = 0): Newcombe's interval reduces to the square-and-add of two Wilsons.
     both, only_a, only_b, neither = 10, 10, 5, 5
