@@ -23,8 +23,8 @@ three layouts), from each with every beam width of `beams` in turn, and the best
 start alone gets caught where fixing one glyph moves all the others, and a wider beam is not a wider
 search (its sweeps take other paths: on a clean test plate beam 6 stopped at a string far less likely
 than the true one, which beams 3, 4 and 8 found); the strings are scored once and shared, so the widths
-together find a string at least as likely as each width alone. Whether the plate has the EU band is decided first, by the best likelihood of
-the starting strings with and without it. Cost: about 3 x beam x 134 renderings per sweep and width. The
+together find a string at least as likely as each width alone. Whether the plate has the EU band is
+decided first, by the best likelihood of the starting strings with and without it. Cost: about 3 x beam x 134 renderings per sweep and width. The
 default search (beams 3 then 6, at most 6 sweeps) against beam 3 with 4 sweeps on the same plates, and what
 each costs: leaderboard/studies/ideal_observer_beam.json (benchmark.studies.observer_beam_study).
 """
@@ -141,9 +141,7 @@ class IdealObserverReader(Reader):
         cam = self._camera
         assert cam is not None
         variance = observed.clamp(min=0) + cam["read_noise_e"] ** 2 + cam["electrons_per_level"] ** 2 / 12
-        channel = bayer_masks(y1 - y0 + 1, x1 - x0 + 1)[:, y0 % 2:y0 % 2 + y1 - y0, x0 % 2:x0 % 2 + x1 - x0]
-        channel = channel.reshape(3, -1).argmax(0)
-        scorer = _Scorer(cam, (x1 - x0, y1 - y0), (y0, x0), observed, 1.0 / variance, channel)
+        scorer = _Scorer(cam, (x1 - x0, y1 - y0), (y0, x0), observed, 1.0 / variance)
         alphabets = format_alphabets(self.plate_format)
         seen: dict[str, float] = {}
         starts = _starting_strings(alphabets)
@@ -188,11 +186,14 @@ class _Scorer:
     """Profile log-likelihood of candidate strings for one box (gain and offset fitted per colour)."""
 
     def __init__(self, cam: dict[str, Any], size: tuple[int, int], origin: tuple[int, int], observed: Tensor,
-                 weight: Tensor, channel: Tensor) -> None:
+                 weight: Tensor) -> None:
         self.cam, self.size, self.origin = cam, size, origin
-        self.y, self.w, self.channel = observed, weight, channel
-        self._blur = BoxBlur(cam["psf"], cam["electrons_per_unit"], (size[1], size[0]), origin)
-        self._footprint: Tensor | None = None
+        self.y, self.w = observed, weight
+        w, h = size
+        self._blur = BoxBlur(cam["psf"], cam["electrons_per_unit"], (h, w), origin)
+        self.channel = self._blur.masks.reshape(3, -1).argmax(0)  # each site's colour, in the box's Bayer phase
+        # The blurred box indicator: how much of each site's light comes from the box.
+        self._footprint = self._blurred(torch.ones(1, 3, h, w, dtype=torch.float64))[0]
 
     def score(self, texts: list[str], band: bool, chunk: int = 32) -> Tensor:
         """Log-likelihood (N,) of each text, up to a constant shared by all texts of this box."""
@@ -206,8 +207,6 @@ class _Scorer:
         w, h = self.size
         plates = np.stack([np.asarray(render_plate(t, (w, h), REFERENCE_BACKGROUND, band)) for t in texts])
         plate = self._blurred(torch.from_numpy(plates.astype(np.float64) / 255).permute(0, 3, 1, 2))
-        if self._footprint is None:  # the blurred box indicator: how much of each site's light comes from the box
-            self._footprint = self._blurred(torch.ones(1, 3, h, w, dtype=torch.float64))[0]
         total = torch.zeros(len(texts), dtype=torch.float64)
         for c in range(3):
             sites = self.channel == c

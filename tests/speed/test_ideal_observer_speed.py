@@ -43,9 +43,7 @@ def test_box_blur_scores_candidates_faster(benchmark, monkeypatch):
     scorers = []
     for x0, y0, x1, y1 in BOXES:
         observed = electrons[y0:y1, x0:x1].reshape(-1)
-        channel = torch.zeros(observed.numel(), dtype=torch.long)
-        channel[::2], channel[1::4] = 1, 2
-        scorers.append(io._Scorer(reader._camera, (x1 - x0, y1 - y0), (y0, x0), observed, 1 / observed, channel))
+        scorers.append(io._Scorer(reader._camera, (x1 - x0, y1 - y0), (y0, x0), observed, 1 / observed))
     box_blur = io._Scorer._blurred
 
     def run(blur):
