@@ -339,14 +339,16 @@ def page_html(entries: Sequence[Entry], charts: Sequence[Path], pictures: Sequen
                 svgs.append(figure)
     samples = [p for p in pictures if not p.name.startswith("plate_width__")]
     per_lens = []
-    for lens in lenses:
+    apart_lenses = [a.entry.lens for a in apart if a.entry.lens not in lenses]
+    for lens in dict.fromkeys([*lenses, *apart_lenses]):  # an entry shown apart keeps its pictures, marked
         # Pictures are `{lens}__{profile}[__curves].png`, the lens made file-safe (publish.leaderboard), which
         # may itself hold "__" (a spec path's "/[" become "__"): split from the right.
         mine = [p for p in samples if p.stem.removesuffix("__curves").rsplit("__", 1)[0] == file_safe(lens)]
         if mine:
             imgs = "".join(f'<p>{_e(p.stem)}</p><img loading="lazy" src="samples/{_e(p.name)}" alt="{_e(p.stem)}">'
                            for p in mine)
-            per_lens.append(f"<details><summary>{_e(lens)}</summary>{imgs}</details>")
+            mark = " (shown apart: another version)" if lens in apart_lenses else ""
+            per_lens.append(f"<details><summary>{_e(lens)}{mark}</summary>{imgs}</details>")
     static = "".join(f'<figure><img loading="lazy" src="charts/{_e(p.name)}" alt="{_e(p.stem)}">'
                      f"<figcaption>{_e(p.stem)}</figcaption></figure>" for p in charts)
     return "\n".join([

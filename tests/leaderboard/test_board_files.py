@@ -48,6 +48,14 @@ def test_every_file_of_the_published_leaderboard_is_backed():
     assert not missing, f"pages link files that do not exist: {missing}"
 
 
+def test_the_web_page_shows_every_sample_picture_those_shown_apart_marked():
+    page = (LEADERBOARD / "index.html").read_text()
+    linked = set(LINK.findall(page))
+    unshown = [p.name for p in (LEADERBOARD / "samples").glob("*.png") if f"samples/{p.name}" not in linked]
+    assert not unshown, f"sample pictures the web page does not show: {unshown}"
+    assert "(shown apart: another version)</summary>" in page  # the quick board shows seven entries apart
+
+
 def test_the_readme_is_short_and_the_attacker_table_has_its_own_page():
     readme = (LEADERBOARD / "README.md").read_text()
     attackers = (LEADERBOARD / board_files.ATTACKERS_PAGE).read_text()
