@@ -15,7 +15,6 @@ Writes leaderboard/studies/ideal_observer_beam.json.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import logging
 import os
@@ -24,12 +23,10 @@ from pathlib import Path
 
 from attacks.readers.ideal_observer_reader import IdealObserverReader
 from benchmark.results.stats import paired_accuracy_difference, paired_table
-from benchmark.runner.config import RunConfig
 from benchmark.runner.evaluation import read_plates
 from benchmark.runner.tasks import fit_context, plate_set
-from benchmark.store.cache import cache_root
-from benchmark.store.profiles import get_profile
 from benchmark.studies.observer_study import REPO, quick_lenses
+from benchmark.studies.reader_study import quota_config
 
 OUT_JSON = REPO / "leaderboard" / "studies" / "ideal_observer_beam.json"
 SETTINGS = {"beam 3, 4 sweeps": ((3,), 4), "beam 6, 6 sweeps": ((6,), 6), "beams 3 then 6, 6 sweeps": ((3, 6), 6)}
@@ -42,9 +39,7 @@ log = logging.getLogger(__name__)
 def read_case(lens_name: str, low: float, high: float, n_plates: int,
               settings: dict[str, tuple[tuple[int, ...], int]]) -> dict:
     """Every setting's per-plate outcomes on the plate windows of `lens_name` in [low, high) px (module docstring)."""
-    profile = dataclasses.replace(get_profile("quick"), plates_per_width_bin=n_plates, plates_per_wide_bin=n_plates)
-    cfg = RunConfig(lenses=[lens_name], attacks=["ideal-observer"], scenes="synthetic", profile=profile, seeds=[0],
-                    cache_dir=cache_root())
+    cfg = quota_config((lens_name,), ("ideal-observer",), n_plates, 0)
     lens = quick_lenses()[lens_name]
     plates = plate_set(cfg, 0, lens)
     if plates is None:

@@ -78,14 +78,19 @@ def summarise(records: list[dict], lens_specs: dict[str, dict], study: dict | No
     return {"lenses": out, "consistency": check}
 
 
+def quota_config(names: tuple[str, ...], readers: tuple[str, ...], n_plates: int, seed: int,
+                 cache_dir: Path | None = None) -> RunConfig:
+    """The quick profile's run configuration with a quota of `n_plates` plate windows per width bin."""
+    profile = dataclasses.replace(get_profile("quick"), plates_per_width_bin=n_plates, plates_per_wide_bin=n_plates)
+    return RunConfig(lenses=list(names), attacks=list(readers), scenes="synthetic", profile=profile, seeds=[seed],
+                     cache_dir=cache_dir or cache_root())
+
+
 def run_reader_study(names: tuple[str, ...] = LENSES, readers: tuple[str, ...] = READERS, n_plates: int = 4,
                      seed: int = 0, out_json: Path | None = OUT_JSON, cache_dir: Path | None = None) -> dict:
     """Read `n_plates` plates per width bin and lens (the run's plate set with that quota) with each
     reader; write and return the record (module docstring)."""
-    profile = dataclasses.replace(get_profile("quick"), plates_per_width_bin=n_plates,
-                                  plates_per_wide_bin=n_plates)
-    cfg = RunConfig(lenses=list(names), attacks=list(readers), scenes="synthetic", profile=profile, seeds=[seed],
-                    cache_dir=cache_dir or cache_root())
+    cfg = quota_config(names, readers, n_plates, seed, cache_dir)
     specs = quick_lens_specs()
     unknown = [n for n in names if n not in specs]
     if unknown:
