@@ -31,11 +31,11 @@ class FitCode:
 
 FIT_CODE: dict[str, FitCode] = {
     "learned-reader": FitCode("attacks.readers.learned_reader", 1,
-                              "5f48f18d2eb401d487a3728256d0a970abb55e56fd78b8011d3e2449e30bf97c"),
+                              "034b9bd41004a946d214103dd9362a5c40ef0b1e40f536239357fdd09f62b8c6"),
     "learned-reader-psf": FitCode("attacks.readers.learned_reader_psf", 1,
-                                  "5d7421b9b52689ade6686f45ba4d0aa44d7f7fcb1594347809bd5fd631f96301"),
+                                  "9e2d366eecfaa4c85ebd365c0f2174c43e52fe6c41d84b62d268531e7b4baa80"),
     "nafnet-known-psf": FitCode("attacks.restorers.nafnet_known_psf", 1,
-                                "453662cd035a00b5d3ea9d433821c771d10893182ef1741f82fd3b93af07f8e0"),
+                                "57c5a7e932eb306f104cbde0b9294c32c59e7ed64d56d64bc0e2e29ac584bc3e"),
 }
 
 
