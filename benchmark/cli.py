@@ -234,6 +234,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the run's folder (default runs/publish-<profile>); the same command resumes there")
     pub.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
     pub.add_argument("--dry-run", action="store_true", help="print the plan and its estimated cost; compute nothing")
+    pub.add_argument("--compute-only", action="store_true",
+                     help="compute and cache the run's tasks, publish nothing (what each lens's process of a "
+                          "publish runs; a plain publish runs one per lens)")
     lens_ship = sub.add_parser("ship-lens", help="co-design (or load from the cache) a lens and ship it, with its "
                                                  "known-pairs NAFNet and learned reader, in the package with their provenance")
     lens_ship.add_argument("lens", choices=CODESIGN_CHOICES, metavar="LENS",
@@ -453,11 +456,13 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_publish(args: argparse.Namespace) -> int:
-    """`publish`: plan, run with a progress bar over the estimated seconds (ETA), replace the entries."""
+    """`publish`: plan; compute each lens in a process of its own (a bar over its estimated seconds, its
+    time and peak memory logged); assemble every lens from the cache and replace the entries."""
     import lenses
     from benchmark import api
     from benchmark.publish import leaderboard, republish
     from benchmark.store.profiles import get_profile
+    from benchmark.store.provenance import code_version
 
     names = args.lens or sorted(lenses.available())
     options = dict(lenses=names, profile=args.profile, seeds=args.seeds, device=args.device)
@@ -469,16 +474,43 @@ def cmd_publish(args: argparse.Namespace) -> int:
         print(plan.render())
         return 0
     out = args.out or Path("runs") / f"publish-{args.profile}"
-    bar = republish.EtaBar(weights)
+    meta = {"command": sys.argv, "publish": True}
+    if args.compute_only:
+        bar = republish.EtaBar(weights, desc=f"publish {', '.join(names)}")
+        try:
+            results = api.run(**options, out=out, meta=meta, on_task=bar)
+        finally:
+            bar.close()
+        return report_failures(results.failed)
+    version = code_version()
+    pending = [(lens, [t for t in plan.tasks if not t.cached and t.lens in (lens, "")]) for lens in names]
+    shared_done: set[str] = set()
+    parts = []
+    for lens, tasks in pending:  # a shared task (sharp scenes, spectrum) is computed by the first lens's process
+        tasks = [t for t in tasks if t.key not in shared_done]
+        shared_done.update(t.key for t in tasks if not t.lens)
+        if tasks:
+            parts.append((lens, len(tasks), sum(weights.seconds[t.key] for t in tasks)))
+    ran = republish.lens_processes(parts, args.profile, args.seeds, args.device, out, version)
+    died = [p for p in ran if p.returncode not in (0, 1)]
+    if died:
+        print(f"error: the process of lens {died[0].lens} died (exit status {died[0].returncode}) after "
+              f"{died[0].wall_s:.0f} s, at a peak of {died[0].peak_rss_mib / 1024:.2f} GiB; the tasks it finished are "
+              f"cached: run the same command again to resume", file=sys.stderr)
+        return 2
+    t0 = time.perf_counter()
+    bar = republish.EtaBar(republish.task_weights(api.plan(**options).tasks), desc="assemble")
     try:
-        results = api.run(**options, out=out, meta={"command": sys.argv, "publish": True}, on_task=bar)
+        results = api.run(**options, out=out, meta=meta, on_task=bar)
     finally:
         bar.close()
     output = results.output
     paths = leaderboard.publish_run(output.rows, get_profile(args.profile).to_dict(), output.lens_info, out,
                                     args.dir or leaderboard.LEADERBOARD, settings=output.settings, replace=True)
-    print(f"published {len(paths)} leaderboard entries (replacing the older ones whole) and rendered the leaderboard "
-          f"in {results.meta['wall_s'] / 60:.1f} min; the run is in {out}/")
+    print(f"published {len(paths)} leaderboard entries (replacing the older ones whole) and rendered the leaderboard; "
+          f"assembled in {(time.perf_counter() - t0) / 60:.1f} min; the run is in {out}/")
+    print("compute of this version (publish_log.jsonl): "
+          + republish.log_summary(republish.read_log(out, version)))
     return report_failures(results.failed)
 
 

@@ -13,20 +13,38 @@ by its estimate, so its rate is estimated seconds per real second and its ETA ca
 this machine's speed and load as the run goes. A task with no estimate counts as the median estimate
 of its kind in the plan (of the whole plan when its kind has none); the plan says how many those are.
 
+Each lens is computed in a process of its own (`lens_processes`: ``publish --compute-only --lens L``), one
+after another, so that no process holds more than one lens's memory (one lens of the quick profile peaks at
+about 6.5 GiB; the whole board in one process grew past 8 GiB); its tasks land in the cache, and the
+publishing process then assembles every lens from the cache and replaces the entries. Each lens process's
+wall time, peak resident memory, exit status and the machine's load go to ``<out>/publish_log.jsonl``
+(appended: a publish resumed in a later sitting adds its parts), so the whole board's compute time is
+measured even when it ran in several sittings (`log_summary`).
+
 The command itself lives in `benchmark.cli` (it runs `benchmark.api.run`, above this layer); this
 module holds what it computes.
 """
 
 from __future__ import annotations
 
+import datetime as _dt
+import json
+import os
 import statistics
+import subprocess
+import sys
+import time
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any, Protocol
 
 from tqdm.auto import tqdm
 
-__all__ = ["CACHED_S", "EtaBar", "Weights", "summary", "task_weights"]
+__all__ = ["CACHED_S", "EtaBar", "LensPart", "Weights", "lens_command", "lens_processes", "log_summary", "read_log",
+           "summary", "task_weights"]
+
+LOG_NAME = "publish_log.jsonl"
 
 # A cached task is read back, not computed: it advances the bar by (about) nothing.
 CACHED_S = 0.5
@@ -112,3 +130,115 @@ def summary(planned: Iterable[_Planned], weights: Weights) -> str:
     if weights.guessed:
         text += f" ({weights.guessed} tasks with no measurement counted at their kind's median)"
     return text
+
+
+@dataclass(frozen=True)
+class LensPart:
+    """One lens's process of a publish: what it computed, how long it took and how much memory it held."""
+
+    lens: str
+    code_version: str
+    started: str  # ISO time, UTC
+    to_compute: int  # tasks of the lens (and shared ones) not in the cache when it started
+    estimate_s: float  # their estimated seconds
+    wall_s: float
+    peak_rss_mib: float  # the process's own peak resident memory (VmHWM, polled)
+    returncode: int  # 0: every row; 1: some rows failed (written as failed rows); else the process died
+    load_before: tuple[float, float, float]
+    load_after: tuple[float, float, float]
+
+
+def lens_command(lens: str, profile: str, seeds: Sequence[int], device: str, out: Path) -> list[str]:
+    """The command line of one lens's process: compute and cache its tasks, publish nothing."""
+    return [sys.executable, "-m", "benchmark", "publish", "--compute-only", "--lens", lens, "--profile", profile,
+            "--seeds", ",".join(str(s) for s in seeds), "--device", device, "--out", str(out)]
+
+
+def _high_water_mib(pid: int) -> float | None:
+    """A live process's peak resident memory so far (VmHWM, MiB); None once it is gone."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        return None
+    return None
+
+
+def _wait(process: subprocess.Popen) -> tuple[int, float]:
+    """Wait for a child; its exit status (negative: the signal that killed it) and its own peak resident
+    MiB, polled from /proc while it runs (getrusage's figure would hold the parent's memory, which the child
+    shared until its exec), every 0.05 s in its first 5 s, then every second."""
+    peak, t0 = 0.0, time.perf_counter()
+    while True:
+        pid, status = os.waitpid(process.pid, os.WNOHANG)
+        if pid:
+            process.returncode = os.waitstatus_to_exitcode(status)
+            return process.returncode, peak
+        peak = max(peak, _high_water_mib(process.pid) or 0.0)
+        time.sleep(0.05 if time.perf_counter() - t0 < 5 else 1.0)
+
+
+def lens_processes(parts: Sequence[tuple[str, int, float]], profile: str, seeds: Sequence[int], device: str,
+                   out: Path, code_version: str, echo: Any = print) -> list[LensPart]:
+    """Compute each lens of `parts` ((lens, tasks to compute, estimated seconds), in order) in a process of
+    its own, one at a time, logging each to ``out/publish_log.jsonl``. Stops at the first process that
+    died (a signal or an exit status other than 0 and 1): what it finished is cached; the same command
+    resumes. Returns the parts run."""
+    out.mkdir(parents=True, exist_ok=True)
+    done: list[LensPart] = []
+    left = sum(p[2] for p in parts)
+    for i, (lens, count, estimate) in enumerate(parts, 1):
+        echo(f"[{i}/{len(parts)}] {lens}: {count} tasks to compute, about {estimate / 60:.0f} min "
+             f"(all lenses left: about {left / 60:.0f} min)")
+        started, load_before, t0 = _dt.datetime.now(_dt.timezone.utc), os.getloadavg(), time.perf_counter()
+        process = subprocess.Popen(lens_command(lens, profile, seeds, device, out / "lenses" / lens))
+        try:
+            code, peak = _wait(process)
+        except BaseException:
+            process.terminate()
+            raise
+        part = LensPart(lens, code_version, started.isoformat(timespec="seconds"), count, round(estimate, 1),
+                        round(time.perf_counter() - t0, 1), round(peak, 1), code, tuple(load_before),
+                        tuple(os.getloadavg()))
+        with open(out / LOG_NAME, "a") as f:
+            f.write(json.dumps(asdict(part)) + "\n")
+        done.append(part)
+        left -= estimate
+        echo(f"[{i}/{len(parts)}] {lens}: {part.wall_s / 60:.1f} min, peak {part.peak_rss_mib / 1024:.2f} GiB"
+             + ("" if code in (0, 1) else f"; the process died (exit status {code})"))
+        if code not in (0, 1):
+            break
+    return done
+
+
+def read_log(out: Path, code_version: str | None = None) -> list[LensPart]:
+    """The lens parts logged in ``out/publish_log.jsonl`` (of one code version when given); a line that is
+    not a part (a torn write) is skipped."""
+    path = out / LOG_NAME
+    if not path.exists():
+        return []
+    parts = []
+    for line in path.read_text().splitlines():
+        try:
+            d = json.loads(line)
+            d["load_before"], d["load_after"] = tuple(d["load_before"]), tuple(d["load_after"])
+            part = LensPart(**d)
+        except (ValueError, TypeError, KeyError):
+            continue
+        if code_version is None or part.code_version == code_version:
+            parts.append(part)
+    return parts
+
+
+def log_summary(parts: Sequence[LensPart]) -> str:
+    """The whole publish's compute so far: seconds summed over its lens processes, their sittings (days
+    they started on) and the highest peak; what the budget is compared with."""
+    if not parts:
+        return "no lens process logged"
+    wall = sum(p.wall_s for p in parts)
+    days = sorted({p.started[:10] for p in parts})
+    loads = [max(p.load_before[0], p.load_after[0]) for p in parts]
+    return (f"{len(parts)} lens processes, {wall:.0f} s ({wall / 3600:.2f} h) in all, started "
+            f"{', '.join(days)}; peak {max(p.peak_rss_mib for p in parts) / 1024:.2f} GiB; "
+            f"1-min load {min(loads):.1f}-{max(loads):.1f}")

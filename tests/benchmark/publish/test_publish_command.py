@@ -3,7 +3,10 @@ replace the published ones whole, with a progress bar over the plan's estimated 
 
 from __future__ import annotations
 
+import dataclasses
 import io
+import json
+import sys
 from types import SimpleNamespace
 
 import pytest
@@ -66,3 +69,43 @@ def test_publish_replaces_entries_whole_and_resumes_from_the_cache(tmp_path, cap
     assert all(t.cached for t in plan.tasks)
     assert cli.main(argv) == 0
     assert "(0 to compute," in capsys.readouterr().out
+
+
+def _fake_lens_processes(monkeypatch, scripts):
+    """Make each lens process run a small Python script instead of a benchmark run."""
+    monkeypatch.setattr(republish, "lens_command",
+                        lambda lens, *rest: [sys.executable, "-c", scripts[lens]])
+
+
+def test_lens_processes_log_each_process_and_stop_at_one_that_died(tmp_path, monkeypatch):
+    scripts = {"a": ("import sys, time; block = bytearray(300 * 2**20); block[::4096] = b'x' * len(block[::4096]); "
+                     "time.sleep(0.5); sys.exit(1)"),
+               "b": "import os, signal; os.kill(os.getpid(), signal.SIGKILL)",
+               "c": "pass"}
+    _fake_lens_processes(monkeypatch, scripts)
+    lines = []
+    parts = republish.lens_processes([("a", 3, 60.0), ("b", 2, 30.0), ("c", 1, 5.0)], "smoke", [0], "cpu",
+                                     tmp_path, "v1", echo=lines.append)
+    # a: failed rows (exit 1) do not stop the publish; b was killed: c never starts.
+    assert [p.lens for p in parts] == ["a", "b"]
+    assert parts[0].returncode == 1 and parts[1].returncode == -9
+    # The child's own peak: it touched 300 MiB; the test process's own memory (over 1 GiB with torch) is not in it.
+    assert 300 <= parts[0].peak_rss_mib < 1000
+    assert "the process died (exit status -9)" in lines[-1]
+    logged = republish.read_log(tmp_path)
+    assert logged == parts
+    # Another version's parts and a torn last line are not counted.
+    with open(tmp_path / republish.LOG_NAME, "a") as f:
+        f.write(json.dumps({**dataclasses.asdict(parts[0]), "code_version": "v0"}) + "\n" + '{"lens": "c", "wa')
+    assert republish.read_log(tmp_path, "v1") == parts
+    assert len(republish.read_log(tmp_path)) == 3
+    summary = republish.log_summary(parts)
+    assert summary.startswith(f"2 lens processes, {parts[0].wall_s + parts[1].wall_s:.0f} s")
+    assert f"peak {max(p.peak_rss_mib for p in parts) / 1024:.2f} GiB" in summary
+
+
+def test_lens_command_computes_one_lens_and_publishes_nothing(tmp_path):
+    command = republish.lens_command("gp", "quick", [0, 2], "cpu", tmp_path / "lenses" / "gp")
+    assert command[:3] == [sys.executable, "-m", "benchmark"]
+    args = cli.build_parser().parse_args(command[3:])
+    assert args.compute_only and args.lens == ["gp"] and args.seeds == [0, 2] and args.out == tmp_path / "lenses" / "gp"
