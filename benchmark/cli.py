@@ -235,8 +235,8 @@ def build_parser() -> argparse.ArgumentParser:
     pub.add_argument("--dir", type=Path, default=None, help="leaderboard folder (default: the repository's)")
     pub.add_argument("--dry-run", action="store_true", help="print the plan and its estimated cost; compute nothing")
     pub.add_argument("--compute-only", action="store_true",
-                     help="compute and cache the run's tasks, publish nothing (what each lens's process of a "
-                          "publish runs; a plain publish runs one per lens)")
+                     help="compute and cache the run's tasks, publish nothing (what each process of a publish "
+                          "runs; a plain publish runs one per lens and seed)")
     lens_ship = sub.add_parser("ship-lens", help="co-design (or load from the cache) a lens and ship it, with its "
                                                  "known-pairs NAFNet and learned reader, in the package with their provenance")
     lens_ship.add_argument("lens", choices=CODESIGN_CHOICES, metavar="LENS",
@@ -456,8 +456,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_publish(args: argparse.Namespace) -> int:
-    """`publish`: plan; compute each lens in a process of its own (a bar over its estimated seconds, its
-    time and peak memory logged); assemble every lens from the cache and replace the entries."""
+    """`publish`: plan; compute each lens-seed in a process of its own (a bar over its estimated seconds,
+    its time and peak memory logged); assemble every lens from the cache and replace the entries."""
     import lenses
     from benchmark import api
     from benchmark.publish import leaderboard, republish
@@ -483,19 +483,13 @@ def cmd_publish(args: argparse.Namespace) -> int:
             bar.close()
         return report_failures(results.failed)
     version = code_version()
-    pending = [(lens, [t for t in plan.tasks if not t.cached and t.lens in (lens, "")]) for lens in names]
-    shared_done: set[str] = set()
-    parts = []
-    for lens, tasks in pending:  # a shared task (sharp scenes, spectrum) is computed by the first lens's process
-        tasks = [t for t in tasks if t.key not in shared_done]
-        shared_done.update(t.key for t in tasks if not t.lens)
-        if tasks:
-            parts.append((lens, len(tasks), sum(weights.seconds[t.key] for t in tasks)))
-    ran = republish.lens_processes(parts, args.profile, args.seeds, args.device, out, version)
+    parts = republish.lens_seed_parts(plan.tasks, names, args.seeds, weights)
+    ran = republish.lens_processes(parts, args.profile, args.device, out, version)
     died = [p for p in ran if p.returncode not in (0, 1)]
     if died:
-        print(f"error: the process of lens {died[0].lens} died (exit status {died[0].returncode}) after "
-              f"{died[0].wall_s:.0f} s, at a peak of {died[0].peak_rss_mib / 1024:.2f} GiB; the tasks it finished are "
+        d = died[0]
+        print(f"error: the process of lens {d.lens} seed {d.seed} died (exit status {d.returncode}) after "
+              f"{d.wall_s:.0f} s, at a peak of {d.peak_rss_mib / 1024:.2f} GiB; the tasks it finished are "
               f"cached: run the same command again to resume", file=sys.stderr)
         return 2
     t0 = time.perf_counter()

@@ -13,10 +13,11 @@ by its estimate, so its rate is estimated seconds per real second and its ETA ca
 this machine's speed and load as the run goes. A task with no estimate counts as the median estimate
 of its kind in the plan (of the whole plan when its kind has none); the plan says how many those are.
 
-Each lens is computed in a process of its own (`lens_processes`: ``publish --compute-only --lens L``), one
-after another, so that no process holds more than one lens's memory (one lens of the quick profile peaks at
-about 6.5 GiB; the whole board in one process grew past 8 GiB); its tasks land in the cache, and the
-publishing process then assembles every lens from the cache and replaces the entries. Each lens process's
+Each lens and seed is computed in a process of its own (`lens_processes`: ``publish --compute-only --lens L
+--seeds S``), one after another, so that no process holds more than one lens-seed's memory (one of the quick
+profile peaks at about 6.5 GiB, a lens's three seeds in one process at 7.5 GiB, the whole board in one
+process past 8 GiB); its tasks land in the cache, and the publishing process then assembles every lens
+from the cache and replaces the entries. Each process's
 wall time, peak resident memory, exit status and the machine's load go to ``<out>/publish_log.jsonl``
 (appended: a publish resumed in a later sitting adds its parts), so the whole board's compute time is
 measured even when it ran in several sittings (`log_summary`).
@@ -41,8 +42,8 @@ from typing import Any, Protocol
 
 from tqdm.auto import tqdm
 
-__all__ = ["CACHED_S", "EtaBar", "LensPart", "Weights", "lens_command", "lens_processes", "log_summary", "read_log",
-           "summary", "task_weights"]
+__all__ = ["CACHED_S", "EtaBar", "LensPart", "Weights", "lens_command", "lens_processes", "lens_seed_parts",
+           "log_summary", "read_log", "summary", "task_weights"]
 
 LOG_NAME = "publish_log.jsonl"
 
@@ -146,6 +147,24 @@ class LensPart:
     returncode: int  # 0: every row; 1: some rows failed (written as failed rows); else the process died
     load_before: tuple[float, float, float]
     load_after: tuple[float, float, float]
+    seed: int | None = None  # the seed it ran; None: every seed of the publish in one process
+
+
+def lens_seed_parts(planned: Sequence[_Planned], lenses: Sequence[str], seeds: Sequence[int], weights: Weights
+                    ) -> list[tuple[str, int, int, float]]:
+    """The processes of a publish, in order: (lens, seed, tasks to compute, their estimated seconds) for each
+    lens (in the order given) and seed with a task not in the cache; a task shared by the lenses (sharp
+    scenes, spectrum) counts in the first process of its seed, which computes it."""
+    shared: set[str] = set()
+    parts = []
+    for lens in lenses:
+        for seed in seeds:
+            tasks = [t for t in planned if not t.cached and t.seed == seed and t.lens in (lens, "")
+                     and t.key not in shared]
+            shared.update(t.key for t in tasks if not t.lens)
+            if tasks:
+                parts.append((lens, seed, len(tasks), sum(weights.seconds[t.key] for t in tasks)))
+    return parts
 
 
 def lens_command(lens: str, profile: str, seeds: Sequence[int], device: str, out: Path) -> list[str]:
@@ -179,20 +198,20 @@ def _wait(process: subprocess.Popen) -> tuple[int, float]:
         time.sleep(0.05 if time.perf_counter() - t0 < 5 else 1.0)
 
 
-def lens_processes(parts: Sequence[tuple[str, int, float]], profile: str, seeds: Sequence[int], device: str,
-                   out: Path, code_version: str, echo: Any = print) -> list[LensPart]:
-    """Compute each lens of `parts` ((lens, tasks to compute, estimated seconds), in order) in a process of
-    its own, one at a time, logging each to ``out/publish_log.jsonl``. Stops at the first process that
+def lens_processes(parts: Sequence[tuple[str, int, int, float]], profile: str, device: str, out: Path,
+                   code_version: str, echo: Any = print) -> list[LensPart]:
+    """Compute each lens-seed of `parts` ((lens, seed, tasks to compute, estimated seconds), in order) in a
+    process of its own, one at a time, logging each to ``out/publish_log.jsonl``. Stops at the first process that
     died (a signal or an exit status other than 0 and 1): what it finished is cached; the same command
     resumes. Returns the parts run."""
     out.mkdir(parents=True, exist_ok=True)
     done: list[LensPart] = []
-    left = sum(p[2] for p in parts)
-    for i, (lens, count, estimate) in enumerate(parts, 1):
-        echo(f"[{i}/{len(parts)}] {lens}: {count} tasks to compute, about {estimate / 60:.0f} min "
+    left = sum(p[3] for p in parts)
+    for i, (lens, seed, count, estimate) in enumerate(parts, 1):
+        echo(f"[{i}/{len(parts)}] {lens} seed {seed}: {count} tasks to compute, about {estimate / 60:.0f} min "
              f"(all lenses left: about {left / 60:.0f} min)")
         started, load_before, t0 = _dt.datetime.now(_dt.timezone.utc), os.getloadavg(), time.perf_counter()
-        process = subprocess.Popen(lens_command(lens, profile, seeds, device, out / "lenses" / lens))
+        process = subprocess.Popen(lens_command(lens, profile, [seed], device, out / "lenses" / f"{lens}-s{seed}"))
         try:
             code, peak = _wait(process)
         except BaseException:
@@ -200,12 +219,12 @@ def lens_processes(parts: Sequence[tuple[str, int, float]], profile: str, seeds:
             raise
         part = LensPart(lens, code_version, started.isoformat(timespec="seconds"), count, round(estimate, 1),
                         round(time.perf_counter() - t0, 1), round(peak, 1), code, tuple(load_before),
-                        tuple(os.getloadavg()))
+                        tuple(os.getloadavg()), seed)
         with open(out / LOG_NAME, "a") as f:
             f.write(json.dumps(asdict(part)) + "\n")
         done.append(part)
         left -= estimate
-        echo(f"[{i}/{len(parts)}] {lens}: {part.wall_s / 60:.1f} min, peak {part.peak_rss_mib / 1024:.2f} GiB"
+        echo(f"[{i}/{len(parts)}] {lens} seed {seed}: {part.wall_s / 60:.1f} min, peak {part.peak_rss_mib / 1024:.2f} GiB"
              + ("" if code in (0, 1) else f"; the process died (exit status {code})"))
         if code not in (0, 1):
             break
@@ -239,6 +258,6 @@ def log_summary(parts: Sequence[LensPart]) -> str:
     wall = sum(p.wall_s for p in parts)
     days = sorted({p.started[:10] for p in parts})
     loads = [max(p.load_before[0], p.load_after[0]) for p in parts]
-    return (f"{len(parts)} lens processes, {wall:.0f} s ({wall / 3600:.2f} h) in all, started "
+    return (f"{len(parts)} processes, {wall:.0f} s ({wall / 3600:.2f} h) in all, started "
             f"{', '.join(days)}; peak {max(p.peak_rss_mib for p in parts) / 1024:.2f} GiB; "
             f"1-min load {min(loads):.1f}-{max(loads):.1f}")

@@ -84,11 +84,11 @@ def test_lens_processes_log_each_process_and_stop_at_one_that_died(tmp_path, mon
                "c": "pass"}
     _fake_lens_processes(monkeypatch, scripts)
     lines = []
-    parts = republish.lens_processes([("a", 3, 60.0), ("b", 2, 30.0), ("c", 1, 5.0)], "smoke", [0], "cpu",
+    parts = republish.lens_processes([("a", 0, 3, 60.0), ("b", 1, 2, 30.0), ("c", 1, 1, 5.0)], "smoke", "cpu",
                                      tmp_path, "v1", echo=lines.append)
     # a: failed rows (exit 1) do not stop the publish; b was killed: c never starts.
     assert [p.lens for p in parts] == ["a", "b"]
-    assert parts[0].returncode == 1 and parts[1].returncode == -9
+    assert parts[0].returncode == 1 and parts[1].returncode == -9 and [p.seed for p in parts] == [0, 1]
     # The child's own peak: it touched 300 MiB; the test process's own memory (over 1 GiB with torch) is not in it.
     assert 300 <= parts[0].peak_rss_mib < 1000
     assert "the process died (exit status -9)" in lines[-1]
@@ -100,7 +100,7 @@ def test_lens_processes_log_each_process_and_stop_at_one_that_died(tmp_path, mon
     assert republish.read_log(tmp_path, "v1") == parts
     assert len(republish.read_log(tmp_path)) == 3
     summary = republish.log_summary(parts)
-    assert summary.startswith(f"2 lens processes, {parts[0].wall_s + parts[1].wall_s:.0f} s")
+    assert summary.startswith(f"2 processes, {parts[0].wall_s + parts[1].wall_s:.0f} s")
     assert f"peak {max(p.peak_rss_mib for p in parts) / 1024:.2f} GiB" in summary
 
 
@@ -109,3 +109,14 @@ def test_lens_command_computes_one_lens_and_publishes_nothing(tmp_path):
     assert command[:3] == [sys.executable, "-m", "benchmark"]
     args = cli.build_parser().parse_args(command[3:])
     assert args.compute_only and args.lens == ["gp"] and args.seeds == [0, 2] and args.out == tmp_path / "lenses" / "gp"
+
+
+def test_a_publish_runs_one_process_per_lens_and_seed_with_work_and_each_shared_task_once():
+    planned = [_task("sharp_s0", "sharp", 70.0, seed=0, lens=""), _task("sharp_s1", "sharp", 70.0, seed=1, lens=""),
+               _task("eval_s0_a", "evaluate", 300.0, seed=0, lens="a"), _task("eval_s1_a", "evaluate", 300.0, seed=1,
+                                                                                lens="a", cached=True),
+               _task("eval_s0_b", "evaluate", 200.0, seed=0, lens="b"), _task("eval_s1_b", "evaluate", 200.0, seed=1,
+                                                                                lens="b")]
+    parts = republish.lens_seed_parts(planned, ["b", "a"], [0, 1], republish.task_weights(planned))
+    # b first, as given; its processes compute each seed's shared task; a's seed 1 is all cached.
+    assert parts == [("b", 0, 2, 270.0), ("b", 1, 2, 270.0), ("a", 0, 1, 300.0)]
