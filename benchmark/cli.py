@@ -474,30 +474,28 @@ def cmd_publish(args: argparse.Namespace) -> int:
         print(plan.render())
         return 0
     out = args.out or Path("runs") / f"publish-{args.profile}"
-    meta = {"command": sys.argv, "publish": True}
-    if args.compute_only:
-        bar = republish.EtaBar(weights, desc=f"publish {', '.join(names)}")
+
+    def run_with_bar(task_weights: republish.Weights, desc: str) -> Any:
+        bar = republish.EtaBar(task_weights, desc=desc)
         try:
-            results = api.run(**options, out=out, meta=meta, on_task=bar)
+            return api.run(**options, out=out, meta={"command": sys.argv, "publish": True}, on_task=bar)
         finally:
             bar.close()
-        return report_failures(results.failed)
+
+    if args.compute_only:
+        return report_failures(run_with_bar(weights, f"publish {', '.join(names)}").failed)
     version = code_version()
     parts = republish.lens_seed_parts(plan.tasks, names, args.seeds, weights)
     ran = republish.lens_processes(parts, args.profile, args.device, out, version)
-    died = [p for p in ran if p.returncode not in (0, 1)]
+    died = [p for p in ran if p.died]
     if died:
         d = died[0]
         print(f"error: the process of lens {d.lens} seed {d.seed} died (exit status {d.returncode}) after "
               f"{d.wall_s:.0f} s, at a peak of {d.peak_rss_mib / 1024:.2f} GiB; the tasks it finished are "
               f"cached: run the same command again to resume", file=sys.stderr)
         return 2
-    t0 = time.perf_counter()
-    bar = republish.EtaBar(republish.task_weights(api.plan(**options).tasks), desc="assemble")
-    try:
-        results = api.run(**options, out=out, meta=meta, on_task=bar)
-    finally:
-        bar.close()
+    t0 = time.perf_counter()  # every task is in the cache now: the bar's weights are planned again
+    results = run_with_bar(republish.task_weights(api.plan(**options).tasks), "assemble")
     output = results.output
     paths = leaderboard.publish_run(output.rows, get_profile(args.profile).to_dict(), output.lens_info, out,
                                     args.dir or leaderboard.LEADERBOARD, settings=output.settings, replace=True)

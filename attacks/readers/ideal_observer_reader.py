@@ -24,8 +24,8 @@ start alone gets caught where fixing one glyph moves all the others, and a wider
 search (its sweeps take other paths: on a clean test plate beam 6 stopped at a string far less likely
 than the true one, which beams 3, 4 and 8 found); the strings are scored once and shared, so the widths
 together find a string at least as likely as each width alone. Whether the plate has the EU band is
-decided first, by the best likelihood of the starting strings with and without it. Cost: about 3 x beam x 134 renderings per sweep and width. The
-default search (beams 3 then 6, at most 6 sweeps) against beam 3 with 4 sweeps on the same plates, and what
+decided first, by the best likelihood of the starting strings with and without it. Cost: about
+3 x beam x 134 renderings per sweep and width. The default search (beams 3 then 6, at most 6 sweeps) against beam 3 with 4 sweeps on the same plates, and what
 each costs: leaderboard/studies/ideal_observer_beam.json (benchmark.studies.observer_beam_study).
 """
 

@@ -149,6 +149,11 @@ class LensPart:
     load_after: tuple[float, float, float]
     seed: int | None = None  # the seed it ran; None: every seed of the publish in one process
 
+    @property
+    def died(self) -> bool:
+        """Killed by a signal or exited with a status other than 0 (every row) and 1 (some rows failed)."""
+        return self.returncode not in (0, 1)
+
 
 def lens_seed_parts(planned: Sequence[_Planned], lenses: Sequence[str], seeds: Sequence[int], weights: Weights
                     ) -> list[tuple[str, int, int, float]]:
@@ -225,8 +230,8 @@ def lens_processes(parts: Sequence[tuple[str, int, int, float]], profile: str, d
         done.append(part)
         left -= estimate
         echo(f"[{i}/{len(parts)}] {lens} seed {seed}: {part.wall_s / 60:.1f} min, peak {part.peak_rss_mib / 1024:.2f} GiB"
-             + ("" if code in (0, 1) else f"; the process died (exit status {code})"))
-        if code not in (0, 1):
+             + (f"; the process died (exit status {code})" if part.died else ""))
+        if part.died:
             break
     return done
 

@@ -89,6 +89,7 @@ def test_lens_processes_log_each_process_and_stop_at_one_that_died(tmp_path, mon
     # a: failed rows (exit 1) do not stop the publish; b was killed: c never starts.
     assert [p.lens for p in parts] == ["a", "b"]
     assert parts[0].returncode == 1 and parts[1].returncode == -9 and [p.seed for p in parts] == [0, 1]
+    assert [p.died for p in parts] == [False, True]
     # The child's own peak: it touched 300 MiB; the test process's own memory (over 1 GiB with torch) is not in it.
     assert 300 <= parts[0].peak_rss_mib < 1000
     assert "the process died (exit status -9)" in lines[-1]
