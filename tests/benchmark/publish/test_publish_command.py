@@ -107,7 +107,7 @@ def test_lens_processes_log_each_process_and_stop_at_one_that_died(tmp_path, mon
 
 def test_lens_command_computes_one_lens_and_publishes_nothing(tmp_path):
     command = republish.lens_command("gp", "quick", [0, 2], "cpu", tmp_path / "lenses" / "gp")
-    assert command[:3] == [sys.executable, "-m", "benchmark"]
+    assert command[:3] == [sys.executable, "-m", cli.__package__]  # the package whose parser reads it below
     args = cli.build_parser().parse_args(command[3:])
     assert args.compute_only and args.lens == ["gp"] and args.seeds == [0, 2] and args.out == tmp_path / "lenses" / "gp"
 
