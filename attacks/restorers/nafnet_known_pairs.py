@@ -42,7 +42,7 @@ from attacks.training.pair_psf import estimate_psf
 from attacks.restorers.nafnet_known_psf import NafnetKnownPSF, load_cached, pack, restore_known_psf
 from attacks.training.psf_restorer_training import PretrainCurve, centre, fine_tune, psf_inputs
 
-__all__ = ["ESTIMATED_PSF_PX", "STARTS", "NafnetKnownPairs", "NafnetKnownPairsTuned"]
+__all__ = ["ESTIMATED_PSF_PX", "STARTS", "NafnetKnownPSFTuned", "NafnetKnownPairs", "NafnetKnownPairsTuned"]
 
 STARTS = ("known-psf", "scratch")
 ESTIMATED_PSF_PX = 95
@@ -69,6 +69,7 @@ class NafnetKnownPairs(Restorer):
     """
 
     name: ClassVar[str] = "nafnet-known-pairs"
+    _psf_source: ClassVar[str] = "pair-measured"
     threat_model: ClassVar[ThreatModel] = ThreatModel.KNOWN_PAIRS
     learns: ClassVar[bool] = True
     requires: ClassVar[frozenset[str]] = frozenset({"lens", "train_pairs"})
@@ -116,8 +117,7 @@ class NafnetKnownPairs(Restorer):
         if sensor.shape[0] < 2:
             raise ValueError(f"{self.name}: the known-psf start needs at least 2 TRAIN pairs (some held out), "
                              f"got {sensor.shape[0]}")
-        size = min(ESTIMATED_PSF_PX, (min(sensor.shape[-2:]) - 1) // 2 * 2 + 1)
-        psf, gain = estimate_psf(sensor, sharp, size)
+        psf, gain = self._camera(ctx, sensor, sharp)
         self._otf, self._gain = OtfCache(psf), gain
         start = NafnetKnownPSF(use_shipped=self.use_shipped)
         net, _, _ = start.load_pretrained(ctx)
@@ -139,6 +139,11 @@ class NafnetKnownPairs(Restorer):
         if ctx.artifacts is not None:
             ctx.artifacts.save(self.name, key, pack(net, self.curve))
         return ready(net)
+
+    def _camera(self, ctx: FitContext, sensor: Tensor, sharp: Tensor) -> tuple[Tensor, Tensor]:
+        """The PSF (3, K, K) and gain (3,) the fine-tune feeds its start: measured from the pairs (``pair_psf``)."""
+        size = min(ESTIMATED_PSF_PX, (min(sensor.shape[-2:]) - 1) // 2 * 2 + 1)
+        return estimate_psf(sensor, sharp, size)
 
     def _report(self) -> FitReport:
         assert self.curve is not None
@@ -169,8 +174,8 @@ class NafnetKnownPairs(Restorer):
 
     def describe(self) -> dict[str, Any]:
         """Configuration: start, backend option, training budget and recipe."""
-        recipe = ("pair-measured psf + wiener, fine-tune of nafnet-known-psf: -psnr, adamw 2e-4, cosine, log-step stop"
-                  if self.start == "known-psf" else "nafnet: -psnr, adamw 1e-3, cosine")
+        recipe = (f"{self._psf_source} psf + wiener, fine-tune of nafnet-known-psf: -psnr, adamw 2e-4, cosine, "
+                  "log-step stop" if self.start == "known-psf" else "nafnet: -psnr, adamw 1e-3, cosine")
         described = {**super().describe(), "start": self.start, "backend": self.backend,
                      "budget": None if self.budget is None else self.budget.to_dict(), "recipe": recipe}
         if self.shipped is not None:
@@ -190,3 +195,20 @@ class NafnetKnownPairsTuned(NafnetKnownPairs):
 
     def __init__(self, backend: str = "onnx", use_shipped: bool = True) -> None:
         super().__init__(start="known-psf", backend=backend, use_shipped=use_shipped)
+
+
+class NafnetKnownPSFTuned(NafnetKnownPairsTuned):
+    """``nafnet-known-psf-tuned`` (lens access, which assumes the known pairs too): the family's pre-trained
+    restorer fed the lens's own PSF and gain, as ``nafnet-known-psf`` is, and fine-tuned on the lens's TRAIN
+    pairs until their held-out PSNR flattens. Its step 0 is ``nafnet-known-psf`` itself, and the fine-tune
+    keeps the start where no step beats it on the held-out pairs."""
+
+    name: ClassVar[str] = "nafnet-known-psf-tuned"
+    threat_model: ClassVar[ThreatModel] = ThreatModel.LENS_ACCESS
+    _psf_source: ClassVar[str] = "the lens's"
+
+    def _camera(self, ctx: FitContext, sensor: Tensor, sharp: Tensor) -> tuple[Tensor, Tensor]:
+        """The lens's measured PSF and gain (``ctx.lens``), as ``nafnet-known-psf`` takes them."""
+        assert ctx.lens is not None  # checked by `requires`
+        with torch.no_grad():
+            return ctx.lens.psf().detach().cpu(), ctx.lens.gain().detach().cpu()

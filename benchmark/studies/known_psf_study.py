@@ -4,8 +4,9 @@ For each lens (default: ideal, defocus, gp, os, os-d-1000) it rebuilds the lens 
 entry at seed 0 (its ``lens_spec``), senses the entry's own val scenes exactly as the run did
 (``benchmark.runner.sensing.sense`` with the run's seed), and restores them with ``wiener-known-psf``
 (recomputed: its per-scene PSNR must equal the entry's, which proves the pairing), ``nafnet-known-psf``
-(zero-shot, the shipped family pre-training) and, with ``--tuned``, ``nafnet-known-pairs-tuned`` (fine-tuned
-on the lens's TRAIN pairs). Each is compared per scene with every restorer of the entry and with the
+(zero-shot, the shipped family pre-training) and, with ``--tuned``, its two fine-tunes on the lens's TRAIN
+pairs, ``nafnet-known-pairs-tuned`` (fed the PSF it measures from the pairs) and ``nafnet-known-psf-tuned``
+(fed the lens's own PSF). Each is compared per scene with every restorer of the entry and with the
 entry's best-per-scene ensemble PSNR (paired bootstrap, ``benchmark.results.stats``), and timed.
 Writes ``leaderboard/studies/known_psf_restorers.json``.
 """
@@ -41,6 +42,7 @@ ROOT = Path(__file__).resolve().parents[2]
 ENTRIES = ROOT / "leaderboard" / "entries"
 OUT = ROOT / "leaderboard" / "studies" / "known_psf_restorers.json"
 LENSES = ("ideal", "defocus", "gp", "os", "os-d-1000")
+TUNED = ("nafnet-known-pairs-tuned", "nafnet-known-psf-tuned")
 
 
 def _entry_units(entry: dict[str, Any], seed: int) -> dict[str, list[float]]:
@@ -57,11 +59,13 @@ def _compare(a: list[float], b: list[float]) -> dict[str, Any]:
 
 
 def pair_with_zero_shot(restorers: dict[str, dict[str, Any]]) -> None:
-    """Add to the fine-tuned restorer's record (where measured) its per-scene comparison with the zero-shot
+    """Add to each fine-tuned restorer's record (where measured) its per-scene comparison with the zero-shot
     ``nafnet-known-psf`` it started from, in place."""
-    tuned, zero = restorers.get("nafnet-known-pairs-tuned"), restorers.get("nafnet-known-psf")
-    if tuned is not None and zero is not None:
-        tuned["versus_zero_shot"] = _compare(tuned["per_scene_psnr_db"], zero["per_scene_psnr_db"])
+    zero = restorers.get("nafnet-known-psf")
+    for name in TUNED:
+        tuned = restorers.get(name)
+        if tuned is not None and zero is not None:
+            tuned["versus_zero_shot"] = _compare(tuned["per_scene_psnr_db"], zero["per_scene_psnr_db"])
 
 
 def measure_lens(name: str, tuned: bool, seed: int = 0) -> dict[str, Any]:
@@ -77,7 +81,7 @@ def measure_lens(name: str, tuned: bool, seed: int = 0) -> dict[str, Any]:
     ctx = FitContext(lens=lens, train_pairs=train_pairs_factory(lens, cfg, seed), seed=seed,
                      budget=profile.attack_budget())
     ours: dict[str, dict[str, Any]] = {}
-    names = ["wiener-known-psf", "nafnet-known-psf"] + (["nafnet-known-pairs-tuned"] if tuned else [])
+    names = ["wiener-known-psf", "nafnet-known-psf"] + (list(TUNED) if tuned else [])
     for attacker_name in names:
         attacker = attacks.load(attacker_name)
         t0 = time.perf_counter()
@@ -117,7 +121,7 @@ def measure_lens(name: str, tuned: bool, seed: int = 0) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--lens", action="append", default=None, help=f"lens (repeatable; default {', '.join(LENSES)})")
-    parser.add_argument("--tuned", action="store_true", help="also fine-tune nafnet-known-pairs-tuned per lens")
+    parser.add_argument("--tuned", action="store_true", help=f"also fine-tune {' and '.join(TUNED)} per lens")
     parser.add_argument("--out", type=Path, default=OUT)
     parser.add_argument("--pair-only", action="store_true",
                         help="measure nothing: add the per-scene pairings to the records already in --out")
