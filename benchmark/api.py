@@ -192,7 +192,8 @@ def run(lenses: str | Sequence[str], attacks: Sequence[AttackerLike] | None = No
         budget_s: Wall-time budget (s) of each expensive step (an attacker's fit, restore or read;
             the bound); a step past it gives a failed row. None: no budget.
         all_chains: With `attacks` None: every attacker registered to run by default, every reader
-            after every restorer (the full cross product) instead of the standard ensemble.
+            after every restorer (the full cross product), then the standard ensemble's cascade on the
+            plates none of them read, instead of the standard ensemble.
         meta: Extra facts stored in results.json's meta (the CLI stores its command line).
         on_task: Called with each task (`benchmark.runner.planning.Task`) as it completes, computed or
             found in the cache (a progress bar's hook; `publish` uses it).
@@ -287,10 +288,13 @@ def _configure(lens_names: str | Sequence[str], requested: Sequence[AttackerLike
     standard = requested is None and not all_chains
     selection = select_attackers(runner.standard_attackers() if standard else requested, remote=executor != "local",
                                  isolate=isolate)
+    chains = STANDARD_ENSEMBLE if standard else None
+    if requested is None and all_chains:
+        selection, chains = runner.with_cascades(selection, isolate)
     cfg = RunConfig(lenses=names, attacks=[r.spec for r in selection.restorers + selection.readers],
                     scenes=scenes, profile=p, seeds=_seeds(seeds), device=check_device(device),
                     plate_format=plate_format, frames=frames, budget_s=budget_s,
-                    chains=STANDARD_ENSEMBLE if standard else None, lens_files=lens_files)
+                    chains=chains, lens_files=lens_files)
     return cfg, selection
 
 

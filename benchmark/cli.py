@@ -155,7 +155,8 @@ def build_parser() -> argparse.ArgumentParser:
     attack.lazy_help = _attack_help  # type: ignore[attr-defined]
     run.add_argument("--all-chains", action="store_true",
                      help="without --attack: every attacker registered to run by default, every reader after every "
-                          "restorer (the full cross product), instead of the standard ensemble's chains")
+                          "restorer (the full cross product), then the standard ensemble's cascade on the plates none "
+                          "of them read, instead of the standard ensemble's chains")
     run.add_argument("--scenes", default="synthetic", help="synthetic (default), photos, or cityscapes:PATH")
     run.add_argument("--profile", default="quick", choices=PROFILE_CHOICES, metavar="PROFILE",
                      help="run size: %(choices)s (default: quick)")
@@ -300,14 +301,14 @@ CODESIGN_CHOICES = _LazyChoices(_codesign_lenses)
 def _attack_help() -> str:
     """`run --attack`'s help: the standard ensemble's chains, what --all-chains adds (the attackers
     that run by default, read from their classes), and what runs only when named."""
-    from benchmark.runner.defaults import STANDARD_ENSEMBLE
+    from benchmark.runner.defaults import CASCADE, STANDARD_ENSEMBLE
     rows = attacker_catalogue()
     default = [r["name"] for r in rows if r["runs_by_default"]]
     named = [r["name"] for r in rows if not r["runs_by_default"] and not r["standard_chains"]]
     text = ("attacker to run (repeatable): a registered name or FILE.py:Class; every reader given runs on the "
             "sensor image and after every restorer given; default: the standard ensemble's chains ("
             + ", ".join(STANDARD_ENSEMBLE) + "); with --all-chains: " + (", ".join(default) if default else "none")
-            + ", every reader after every restorer")
+            + ", every reader after every restorer, then the cascade " + ", ".join(CASCADE))
     if named:
         text += "; run only when named: " + ", ".join(named)
     return text.replace("%", "%%")

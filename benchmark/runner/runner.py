@@ -25,9 +25,9 @@ from benchmark.runner.tasks import TaskResult
 from benchmark.store import cipher
 from benchmark.store.provenance import provenance
 from benchmark.runner.config import RunConfig
-from benchmark.runner.defaults import STANDARD_ENSEMBLE, chain_parts
+from benchmark.runner.defaults import CASCADE, STANDARD_ENSEMBLE, chain_parts
 from benchmark.results.schema import Results as ResultsFile
-from benchmark.results.schema import Row, RowError, settings_hash, write_results
+from benchmark.results.schema import Row, RowError, chain_name, settings_hash, write_results
 
 log = logging.getLogger(__name__)
 
@@ -77,6 +77,20 @@ def select_attackers(requested: list[str] | None, isolate: bool = False) -> Sele
     return Selection([AttackerRef(a.name, spec, file_key(spec)) for a, spec in chosen if isinstance(a, attacks.Restorer)],
                      [AttackerRef(a.name, spec, file_key(spec)) for a, spec in chosen if isinstance(a, attacks.Reader)],
                      failures)
+
+
+def with_cascades(selection: Selection, isolate: bool = False) -> tuple[Selection, tuple[str, ...]]:
+    """The full cross product of `selection` (attackers that run by default) with the standard ensemble's
+    cascade after it: the selection with the cascade's readers added, and the chains to measure (every
+    restorer; every reader on the sensor image and after every restorer; then ``CASCADE``, which reads only
+    the plates no chain of the cross product read)."""
+    parts = [p for chain in CASCADE for p in chain_parts(chain)]
+    extra = select_attackers([p for p in parts if p not in {r.name for r in selection.readers}], isolate)
+    restorers = [r.name for r in selection.restorers]
+    readers = [r.name for r in selection.readers]
+    chains = (*restorers, *readers, *(chain_name(a, b) for a in restorers for b in readers), *CASCADE)
+    return Selection(selection.restorers + extra.restorers, selection.readers + extra.readers,
+                     selection.failures + extra.failures), chains
 
 
 def file_key(spec: str) -> str:

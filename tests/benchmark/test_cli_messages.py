@@ -60,7 +60,8 @@ def test_run_help_names_exactly_the_standard_chains_and_the_attackers_that_run_b
     # The ideal observer runs by default only as the cascade, on the plates no other chain read.
     assert "ideal-observer" not in named + default and CASCADE[0] in STANDARD_ENSEMBLE
     assert "default: the standard ensemble's chains (" + ", ".join(STANDARD_ENSEMBLE) + ")" in text
-    assert "with --all-chains: " + ", ".join(default) + ", every reader after every restorer" in text
+    assert ("with --all-chains: " + ", ".join(default) + ", every reader after every restorer, then the cascade "
+            + ", ".join(CASCADE)) in text
     assert "; run only when named: " + ", ".join(named) in text
     assert all(r["standard_chains"] == [c for c in STANDARD_ENSEMBLE if r["name"] in chain_parts(c)] for r in rows)
     assert next(r for r in rows if r["name"] == "ideal-observer")["standard_chains"] == list(CASCADE)

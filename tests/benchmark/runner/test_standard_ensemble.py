@@ -15,6 +15,7 @@ from benchmark.runner import runner
 from benchmark.runner.config import RunConfig
 from benchmark.runner.evaluation import Attacked, PlateSet, ReadyReader, Target, read_sensor, run_restorers
 from benchmark.runner.planning import run_directory
+from benchmark.results.schema import cascade_name
 from benchmark.runner.rows import RowBuilder
 from benchmark.runner.sensing import to_tensor
 from benchmark.scenes import load_scenes
@@ -110,7 +111,13 @@ def test_default_attackers_are_the_standard_ensemble_and_named_ones_are_exactly_
     assert named.chains is None and named.wants("wiener-known-psf>lpdr")
     full, chosen = api._configure(["ideal"], None, "smoke", [0], "synthetic", "cpu", "local", None, 30, None,
                                   all_chains=True)
-    assert full.chains is None and "identity" in {r.name for r in chosen.restorers}
+    # The full cross product of the attackers that run by default, then the standard ensemble's cascade.
+    restorers, readers = [r.name for r in chosen.restorers], [r.name for r in chosen.readers]
+    assert "identity" in restorers and set(chain_parts(CASCADE[0])) <= set(readers)
+    crossed = [r for r in readers if cascade_name(r) not in CASCADE]
+    assert full.chains is not None and full.chains[-len(CASCADE):] == CASCADE
+    assert set(full.chains) == {*restorers, *crossed, *(f"{a}>{b}" for a in restorers for b in crossed), *CASCADE}
+    assert not any(full.wants(f"{a}>{chain_parts(CASCADE[0])[0]}") for a in restorers)  # a cascade only
     # Two runs that measure different chains never share task results.
     cfg.cache_dir = full.cache_dir = tmp_path
     assert run_directory(cfg, selection.restorers, selection.readers) != run_directory(
