@@ -8,7 +8,8 @@ camera's TRAIN split. Two starts (``start``):
   across the lens family (``nafnet-known-psf``, fed the Wiener estimate with the measured PSF) on the
   pairs until the held-out PSNR of the last eighth of them flattens on a log-step axis
   (``attacks.training.psf_restorer_training.fine_tune``; at most ``FINE_TUNE_STEPS_FACTOR`` times the
-  profile's ``restorer_steps``; the pre-trained start is kept when no step beats it).
+  profile's ``restorer_steps``; the pre-trained start is kept unless a step beats it by the stop rule's
+  0.05 dB).
 - "scratch" (default): a NAFNet of the profile's size (``restorer_steps``, ``nafnet_width``, ``nafnet_*_blocks``)
   trained from random weights with NAFNet's recipe (``attacks.training.restorer_training``).
 
@@ -39,6 +40,7 @@ from attacks.training.restorer_training import (
 from attacks.training.shipped_weights import Shipped
 from attacks.backends.real_fft import OtfCache
 from attacks.training.pair_psf import estimate_psf
+from attacks.training.fit_code import versioned_key
 from attacks.restorers.nafnet_known_psf import NafnetKnownPSF, load_cached, pack, restore_known_psf
 from attacks.training.psf_restorer_training import PretrainCurve, centre, fine_tune, psf_inputs
 
@@ -126,8 +128,8 @@ class NafnetKnownPairs(Restorer):
         start = NafnetKnownPSF(use_shipped=self.use_shipped)
         net, _, _ = start.load_pretrained(ctx)
         self.shipped = start.shipped
-        key = {**self._key(budget, ctx, sensor, sharp), "start": self.start,
-               "pretrained": fingerprint(*(v for _, v in sorted(net.state_dict().items())))}
+        key = versioned_key(self.name, {**self._key(budget, ctx, sensor, sharp), "start": self.start,
+                                        "pretrained": fingerprint(*(v for _, v in sorted(net.state_dict().items())))})
         assert start.budget is not None  # set by load_pretrained
         cached = load_cached(ctx.artifacts, self.name, key, start.budget)
         if cached is not None:
@@ -206,7 +208,7 @@ class NafnetKnownPSFTuned(NafnetKnownPairsTuned):
     """``nafnet-known-psf-tuned`` (lens access, which assumes the known pairs too): the family's pre-trained
     restorer fed the lens's own PSF and gain, as ``nafnet-known-psf`` is, and fine-tuned on the lens's TRAIN
     pairs until their held-out PSNR flattens. Its step 0 is ``nafnet-known-psf`` itself, and the fine-tune
-    keeps the start where no step beats it on the held-out pairs."""
+    keeps the start unless a step beats it by 0.05 dB on the held-out pairs."""
 
     name: ClassVar[str] = "nafnet-known-psf-tuned"
     threat_model: ClassVar[ThreatModel] = ThreatModel.LENS_ACCESS

@@ -31,11 +31,15 @@ class FitCode:
 
 FIT_CODE: dict[str, FitCode] = {
     "learned-reader": FitCode("attacks.readers.learned_reader", 1,
-                              "034b9bd41004a946d214103dd9362a5c40ef0b1e40f536239357fdd09f62b8c6"),
+                              "01a691b4b10e4a794309de3f22efe76912425e2faea670c3daa822085e378756"),
     "learned-reader-psf": FitCode("attacks.readers.learned_reader_psf", 1,
-                                  "9e2d366eecfaa4c85ebd365c0f2174c43e52fe6c41d84b62d268531e7b4baa80"),
+                                  "79c8627b05fe30521ff2f62f8553f91473bd9372696cc2c1fd631e4d3d930fb8"),
+    "nafnet-known-pairs-tuned": FitCode("attacks.restorers.nafnet_known_pairs", 2,
+                                        "560505f07261c9b68057fe61aeeb4fabb6d81e9ac01924e5d94d27715c9bbf6a"),
+    "nafnet-known-psf-tuned": FitCode("attacks.restorers.nafnet_known_pairs", 2,
+                                      "560505f07261c9b68057fe61aeeb4fabb6d81e9ac01924e5d94d27715c9bbf6a"),
     "nafnet-known-psf": FitCode("attacks.restorers.nafnet_known_psf", 1,
-                                "57c5a7e932eb306f104cbde0b9294c32c59e7ed64d56d64bc0e2e29ac584bc3e"),
+                                "ff8df87e2d0bd4c76a2e22e4e110c99f4f5e7368de44568d5cd2ff673ae1754e"),
 }
 
 

@@ -203,9 +203,12 @@ class PretrainCurve:
     still_rising: bool = False
     seconds: float = 0.0
     heldout: list[dict[str, Any]] = dataclasses.field(default_factory=list)  # the held-out lenses
+    kept: int | None = None  # the step whose weights were kept, where that is not simply the best one
 
     @property
     def kept_step(self) -> int:
+        if self.kept is not None:
+            return self.kept
         return self.steps[max(range(len(self.steps)), key=self.heldout_psnr_db.__getitem__)] if self.steps else 0
 
     def to_fit_curve(self) -> FitCurve:
@@ -400,8 +403,10 @@ def fine_tune(model: NAFNet, inputs: Tensor, targets: Tensor, heldout_inputs: Te
     Evaluated at the start (step 0: the pre-trained network as it is) and after 25, 50, 100, ... steps
     (at most ``max_steps``, the cosine schedule's length); it stops "flattened" at the first doubling of
     the steps that gains less than ``min_gain_db``, else "budget" (``still_rising`` when the last
-    doubling still gained). The best evaluation's weights are kept, the start's included: a fine-tune
-    never hands back a network worse on the held-out pairs than the one it started from.
+    doubling still gained). The start is kept unless a step beats it by ``min_gain_db`` (a held-out gain
+    below the stop rule's own threshold is noise that need not carry to other scenes); of the steps that do,
+    the best one is kept. So a fine-tune never hands back a network worse on the held-out pairs than the
+    one it started from, and ``curve.kept`` names the step it hands back.
 
     Args:
         model: The pre-trained network (input ``psf_inputs``, 6 channels).
@@ -414,15 +419,16 @@ def fine_tune(model: NAFNet, inputs: Tensor, targets: Tensor, heldout_inputs: Te
     curve = PretrainCurve()
     t0 = time.perf_counter()
     best: dict[str, Tensor] = {}
+    best_score = -float("inf")
 
     def evaluate(step: int) -> None:
+        nonlocal best, best_score
         score = _heldout_psnr(model, [(heldout_inputs[i:i + 1], heldout_targets[i:i + 1])
                                       for i in range(heldout_inputs.shape[0])], device)
         curve.steps.append(step)
         curve.heldout_psnr_db.append(score)
-        if score >= max(curve.heldout_psnr_db):
-            nonlocal best
-            best = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
+        if step == 0 or (score >= curve.heldout_psnr_db[0] + min_gain_db and score > best_score):
+            best, best_score, curve.kept = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}, score, step
 
     evaluate(0)
     next_eval = min(FINE_TUNE_FIRST_EVAL, max_steps)

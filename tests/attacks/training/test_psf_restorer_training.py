@@ -115,3 +115,30 @@ def test_with_cycles_the_stop_rule_is_read_at_a_cycles_end_only():
         dataclasses.replace(SMALL, max_steps=12, cycle_steps=6)
     assert dataclasses.replace(SMALL, max_steps=24, cycle_steps=12).first_cycles().to_dict() == \
         dataclasses.replace(SMALL, max_steps=12).to_dict()
+
+
+def _fine_tune_case(scenes, min_gain_db: float) -> tuple[torch.nn.Module, training.PretrainCurve]:
+    train, heldout = scenes
+    lens = LensFamily().build(FamilyLens("mask", (0.0, 0.5, -0.5, 1.0, -1.0, 1.0), 10.0))
+    with torch.no_grad():
+        otf, gain = OtfCache(lens.psf()), lens.gain()
+        inputs = psf_inputs(lens(train, generator=torch.Generator().manual_seed(0)), otf, gain)
+        held = psf_inputs(lens(heldout, generator=torch.Generator().manual_seed(1)), otf, gain)
+    net = build_network(SMALL, 0)
+    curve = training.fine_tune(net, inputs, train, held, heldout, max_steps=25, crop_px=32, batch_size=2, seed=0,
+                               min_gain_db=min_gain_db)
+    return net, curve
+
+
+def test_a_fine_tune_keeps_its_start_unless_a_step_beats_it_by_the_stop_rules_gain(scenes):
+    # The untrained network is the Wiener estimate; 25 steps move it. With no threshold the better step is kept.
+    tuned, curve = _fine_tune_case(scenes, 0.0)
+    start, after = curve.heldout_psnr_db
+    assert curve.steps == [0, 25] and after > start, "the 25 steps did not gain: the test proves nothing"
+    assert curve.kept_step == 25
+    # A threshold just above that gain: the same steps (deterministic), and the start handed back unchanged.
+    kept, curve_b = _fine_tune_case(scenes, after - start + 0.01)
+    assert curve_b.heldout_psnr_db == curve.heldout_psnr_db
+    assert curve_b.kept_step == 0 and curve_b.to_fit_curve().kept_step == 0
+    assert all(torch.equal(kept.state_dict()[k], v) for k, v in build_network(SMALL, 0).state_dict().items())
+    assert any(not torch.equal(tuned.state_dict()[k], v) for k, v in kept.state_dict().items())
