@@ -26,6 +26,7 @@ Writes ``leaderboard/studies/run_pairing.json`` (merged per lens).
 from __future__ import annotations
 
 import argparse
+import gzip
 import json
 import os
 from pathlib import Path
@@ -43,7 +44,7 @@ from benchmark.results.plate_scoring import WIDTH_BINS_PX
 from benchmark.results.schema import Results, Row
 from benchmark.store.provenance import git_commit
 
-__all__ = ["main", "pair_lens"]
+__all__ = ["main", "pair_lens", "read_results"]
 
 ROOT = Path(__file__).resolve().parents[2]
 LEADERBOARD = ROOT / "leaderboard"
@@ -172,10 +173,23 @@ def proposal(record: dict[str, Any], runs: dict[str, list[Row]]) -> dict[str, An
             "dropped": sorted({e.attack for e in effects} - set(chains)), "joint_removal": joint}
 
 
+def read_results(path: Path) -> Results:
+    """A run's results: its folder (``results.json`` in it) or a results file, plain or gzipped (``.json.gz``,
+    as ``leaderboard/studies/cross_product`` keeps the cross-product runs the ensemble is chosen on)."""
+    file = path / "results.json" if path.is_dir() else path
+    if not file.is_file():
+        raise SystemExit(f"{path}: neither a run folder holding results.json nor a results file")
+    raw = gzip.decompress(file.read_bytes()) if file.name.endswith(".gz") else file.read_bytes()
+    try:
+        return Results.from_json(json.loads(raw))
+    except (ValueError, KeyError, TypeError) as e:
+        raise SystemExit(f"{file}: not a run's results ({type(e).__name__}: {e})") from e
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--run", type=Path, action="append", required=True,
-                        help="a run's folder (its results.json); repeatable")
+                        help="a run's folder (its results.json) or a results file (.json, .json.gz); repeatable")
     parser.add_argument("--lens", action="append", default=None, help="lens (repeatable; default: every lens of the runs)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=OUT)
@@ -185,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     baselines = {}
     for folder in args.baseline:
-        rows = Results.from_json(json.loads((folder / "results.json").read_text())).rows
+        rows = read_results(folder).rows
         baselines.update({lens: (folder, [r for r in rows if r.lens == lens and r.seed == args.seed])
                           for lens in {r.lens for r in rows}})
     study_path = LEADERBOARD / "studies" / "ideal_observer.json"
@@ -196,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
     record.setdefault("lenses", {})
     runs: dict[str, list[Row]] = {}
     for folder in args.run:
-        results = Results.from_json(json.loads((folder / "results.json").read_text()))
+        results = read_results(folder)
         for lens in args.lens or sorted({r.lens for r in results.rows}):
             if not (LEADERBOARD / "entries" / entry_name(lens, "quick", "synthetic")).exists():
                 print(f"{lens}: no published quick entry; skipped")

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+import gzip
 import json
+
+import pytest
 
 from benchmark.results.entries import read_entry
 from benchmark.results.schema import Results
@@ -38,6 +41,21 @@ def test_an_entry_paired_with_itself_differs_by_nothing(tmp_path):
     against = written["against_baseline"]
     assert against["plates_from_px"]["run - entry"]["difference"] == 0.0
     assert against["scenes"]["run - entry"]["difference"] == 0.0 and "run_restorers_db" not in against["scenes"]
+
+
+def test_a_gzipped_results_file_reads_as_its_run_folder_and_a_corrupt_one_names_itself(tmp_path):
+    gp = entry("gp")
+    text = json.dumps(Results(gp.rows, gp.settings).to_json())
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "results.json").write_text(text)
+    (tmp_path / "gp.json.gz").write_bytes(gzip.compress(text.encode()))
+    folder, packed = run_pairing_study.read_results(tmp_path / "run"), run_pairing_study.read_results(tmp_path / "gp.json.gz")
+    assert [r.to_json() for r in packed.rows] == [r.to_json() for r in folder.rows] and len(folder.rows) == len(gp.rows)
+    (tmp_path / "bad.json.gz").write_bytes(gzip.compress(b'{"rows": 3}'))
+    with pytest.raises(SystemExit, match="bad.json.gz: not a run's results"):
+        run_pairing_study.read_results(tmp_path / "bad.json.gz")
+    with pytest.raises(SystemExit, match="neither a run folder"):
+        run_pairing_study.read_results(tmp_path / "missing")
 
 
 def test_a_run_with_other_plates_is_reported_not_paired():
