@@ -365,6 +365,12 @@ def _checking_requirements(
 class Restorer(Attack):
     """An attacker that rebuilds the sharp scene from sensor images."""
 
+    def restoration_key(self) -> str | None:
+        """After ``fit``: a fingerprint of everything its ``restore`` depends on, or None (the default: no
+        claim). Two restorers of one run with equal keys return the same images for every input, so the
+        runner restores once and scores both from it (a fine-tune that kept its start is its start)."""
+        return None
+
     @abstractmethod
     def restore(self, sensor: Tensor) -> Tensor:
         """Estimate the scene radiance.

@@ -41,7 +41,7 @@ from attacks.training.shipped_weights import Shipped
 from attacks.backends.real_fft import OtfCache
 from attacks.training.pair_psf import estimate_psf
 from attacks.training.fit_code import versioned_key
-from attacks.restorers.nafnet_known_psf import NafnetKnownPSF, load_cached, pack, restore_known_psf
+from attacks.restorers.nafnet_known_psf import NafnetKnownPSF, known_psf_key, load_cached, pack, restore_known_psf
 from attacks.training.psf_restorer_training import PretrainCurve, centre, fine_tune, psf_inputs
 
 __all__ = ["ESTIMATED_PSF_PX", "FINE_TUNE_STEPS_FACTOR", "STARTS", "NafnetKnownPSFTuned", "NafnetKnownPairs", "NafnetKnownPairsTuned"]
@@ -168,6 +168,11 @@ class NafnetKnownPairs(Restorer):
     def _key(self, budget: RestorerBudget, ctx: FitContext, sensor: Tensor, sharp: Tensor) -> dict[str, Any]:
         return {"attack": self.name, "budget": budget.to_dict(), "lens": lens_key(ctx.lens),
                 "data": data_identity(sensor, sharp), "seed": ctx.seed}
+
+    def restoration_key(self) -> str | None:
+        """The known-psf start's: its network, PSF, gain and backend (``known_psf_key``), so a fine-tune that
+        kept its start with the lens's own PSF is ``nafnet-known-psf`` to the runner; the scratch start's None."""
+        return known_psf_key(self.network, self._otf, self._gain, self.backend) if self.start == "known-psf" else None
 
     def restore(self, sensor: Tensor) -> Tensor:
         """Scene estimate: (B, 3, H, W) in [0, 1] -> (B, 3, H, W) in [0, 1]."""

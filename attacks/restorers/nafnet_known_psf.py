@@ -41,11 +41,12 @@ from attacks.training.psf_restorer_training import (
     psf_budget,
     psf_inputs,
 )
-from attacks.training.restorer_training import collect_pairs, data_identity
+from attacks.training.restorer_training import collect_pairs, data_identity, fingerprint
 from attacks.training.fit_code import versioned_key
 from attacks.training.shipped_weights import Shipped, find_shipped
 
-__all__ = ["SHIPPED_SCENES", "NafnetKnownPSF", "load_cached", "pack", "restore_known_psf", "shipped_key", "unpack"]
+__all__ = ["SHIPPED_SCENES", "NafnetKnownPSF", "known_psf_key", "load_cached", "pack", "restore_known_psf", "shipped_key",
+           "unpack"]
 
 log = logging.getLogger(__name__)
 
@@ -98,6 +99,15 @@ def restore_known_psf(engine: InferenceEngine, sensor: Tensor, otf: OtfCache, ga
     image at a time (the six-channel input of a whole batch of frames would be large)."""
     return torch.cat([engine(psf_inputs(sensor[i:i + 1].cpu(), otf, gain)).clamp(0.0, 1.0)
                       for i in range(sensor.shape[0])]).to(sensor.device)
+
+
+def known_psf_key(network: NAFNet | None, otf: OtfCache | None, gain: Tensor | None, backend: str) -> str | None:
+    """What ``restore_known_psf`` returns depends on: the network's weights, the PSF and gain, the backend
+    (None before a fit). Shared by every restorer that restores through ``restore_known_psf``."""
+    if network is None or otf is None or gain is None:
+        return None
+    weights = (v for _, v in sorted(network.state_dict().items()))
+    return f"restore_known_psf/{backend}/{fingerprint(*weights, otf.psf, gain)}"
 
 
 def _metadata(data: bytes) -> dict[str, str]:
@@ -185,6 +195,10 @@ class NafnetKnownPSF(Restorer):
         if self.engine is None or self._otf is None or self._gain is None:
             raise RuntimeError(f"{self.name}: call fit(ctx) before restore()")
         return restore_known_psf(self.engine, sensor, self._otf, self._gain)
+
+    def restoration_key(self) -> str | None:
+        """The network's weights, the PSF and gain it is fed, and the backend (``known_psf_key``)."""
+        return known_psf_key(self.network, self._otf, self._gain, self.backend)
 
     def describe(self) -> dict[str, Any]:
         """Configuration: budget, the pre-training's provenance and held-out score."""

@@ -225,6 +225,22 @@ class Target:
     plates: PlateSet | None = None      # where plates are read; None: on the scenes themselves
 
 
+ReadResult = tuple[list[PlateOutcome], dict[str, float], list[list[attacks.PlateRead]]]
+"""What ``read_plates`` returns: per-plate outcomes, timing, the reads."""
+
+
+@dataclass
+class Restored:
+    """What a restorer's output gave in this evaluation, kept (small) so that a later restorer with the same
+    ``restoration_key`` is scored from it without restoring again: the scene metrics and each reader's reads
+    of its plate windows."""
+
+    name: str
+    metrics: dict[str, float]
+    per_image: dict[str, list[float]]
+    reads: dict[str, ReadResult] = field(default_factory=dict)  # reader name -> its read of the windows
+
+
 @dataclass
 class Attacked:
     """Rows, per-plate records and restored images of one lens and seed."""
@@ -244,6 +260,7 @@ class Attacked:
     # kept apart while restorers and readers interleave; `finish` appends them to rows / plates.
     reader_rows: dict[str, list[Row]] = field(default_factory=dict)
     reader_plates: dict[str, list[dict]] = field(default_factory=dict)
+    by_key: dict[str, Restored] = field(default_factory=dict)  # restoration_key -> the first restorer of it
 
     def finish(self) -> None:
         """Move the reader rows and plate records after the restorer rows, reader by reader."""
@@ -291,19 +308,33 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
     root = target.ctx.cache_dir
     error = attempt(attacker.name, "fit", lambda: attacker.fit(ctx), cfg.budget_s, root)  # normally a cache hit
     fit_s = meta.get("fit_s", time.perf_counter() - t0)  # fitted here when its task's result was not kept
-    t0 = time.perf_counter()
-    restored = error if isinstance(error, RowError) else attempt(
-        attacker.name, "restore", lambda: restore_all(attacker, target.sensor, cfg.profile.batch_size, cfg.device),
-        cfg.budget_s, root)
-    if isinstance(restored, RowError):
-        out.rows.append(rows.failed(kind, attacker.name, restored, restorer=attacker.name, settings=settings))
-        return
-    run_s = time.perf_counter() - t0
-    # What each stage frees goes back to the system before the next (see native_memory): glibc
-    # would otherwise hold it, and a restorer's step would add up its stages' transients.
-    release_free_memory()
-    metrics, per_image = restoration_metrics(restored, target.sharp)
-    if target.plates is not None:
+    key = None if isinstance(error, RowError) else restoration_key(attacker)
+    twin = out.by_key.get(key) if key is not None else None
+    reused = twin is not None
+    if twin is not None:  # restores as an earlier restorer of this run does: scored from its output
+        log.info("%s on %s restores as %s does (the same restoration_key): scored from its output",
+                 attacker.name, target.lens_name, twin.name)
+        restored = out.restored[twin.name]
+        metrics, per_image = dict(twin.metrics), twin.per_image
+    else:
+        t0 = time.perf_counter()
+        result = error if isinstance(error, RowError) else attempt(
+            attacker.name, "restore", lambda: restore_all(attacker, target.sensor, cfg.profile.batch_size, cfg.device),
+            cfg.budget_s, root)
+        if isinstance(result, RowError):
+            out.rows.append(rows.failed(kind, attacker.name, result, restorer=attacker.name, settings=settings))
+            return
+        restored = result
+        del result  # `restored` alone holds the batch: it goes once scored (below)
+        run_s = time.perf_counter() - t0
+        # What each stage frees goes back to the system before the next (see native_memory): glibc
+        # would otherwise hold it, and a restorer's step would add up its stages' transients.
+        release_free_memory()
+        metrics, per_image = restoration_metrics(restored, target.sharp)
+        metrics["images_per_s"] = target.sharp.shape[0] / run_s
+        if key is not None:
+            twin = out.by_key[key] = Restored(attacker.name, dict(metrics), per_image)
+    if target.plates is not None and not reused:
         # Of the scenes only the sample picture's first one is kept (every restorer's 64 full scenes
         # would hold gigabytes); a clone, as a slice would keep the whole batch's storage alive.
         # Scored already, the frames go before the windows are restored and read.
@@ -312,7 +343,10 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
     images: torch.Tensor | list[torch.Tensor] = restored
     # Only the chains the run measures read this restorer's output (cfg.chains: the standard ensemble).
     readers = [r for r in readers if cfg.wants(chain_name(attacker.name, r.reader.name))]
-    if target.plates is not None and readers:
+    # A twin's reads of the windows are this restorer's; the windows are restored only for readers it lacks.
+    known = twin.reads if reused and twin is not None and target.plates is not None else {}
+    to_read = [r for r in readers if r.reader.name not in known]
+    if target.plates is not None and to_read:
         windows = attempt(attacker.name, "restore", lambda: restore_windows(
             attacker, target.plates.sensor, cfg.profile.batch_size, cfg.device),  # type: ignore[union-attr]
             cache_root=root)
@@ -327,20 +361,42 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
     if kind == "reference":
         out.references.add(attacker.name)
     for reader in readers:
-        read_chain(target, reader, attacker.name, images, cfg, rows, out)
+        read = read_chain(target, reader, attacker.name, images, cfg, rows, out, known.get(reader.reader.name))
+        if twin is not None and target.plates is not None and read is not None:
+            twin.reads.setdefault(reader.reader.name, read)
         release_free_memory()
     del restored
-    if target.plates is not None and readers:
+    if target.plates is not None and to_read:
         out.restored_plates[attacker.name] = {i: images[i] for i in gallery_windows(target.plates)}
+    elif reused and twin is not None and twin.name in out.restored_plates:
+        out.restored_plates[attacker.name] = out.restored_plates[twin.name]
     del images
-    metrics.update({"fit_s": float(fit_s), "images_per_s": target.sharp.shape[0] / run_s})
+    metrics["fit_s"] = float(fit_s)
+    notes = {**fit_notes(error), LEARNS: _flag(attacker.learns)}
+    if reused and twin is not None:
+        notes[RESTORED_AS] = twin.name
     row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
-                   threat_model=attacker.threat_model.value, settings=settings,
-                   notes={**fit_notes(error), LEARNS: _flag(attacker.learns)})
+                   threat_model=attacker.threat_model.value, settings=settings, notes=notes)
     scene_intervals(row, per_image, seed=row.seed)
     row.set_units(scene_units(target.scenes, per_image))
     out.rows.append(row)
     log.debug("%s on %s: resident memory %.2f GB", row.attack, target.lens_name, resident_gb())
+
+
+RESTORED_AS = "restored_as"
+"""Row note: the restorer of this run whose output this one's rows were scored from (the same
+``restoration_key``: the same images for every input), its speed included."""
+
+
+def restoration_key(attacker: attacks.Restorer) -> str | None:
+    """The attacker's ``restoration_key`` after its fit; None where it makes no claim, or raises (logged: it is
+    then restored on its own, as any restorer)."""
+    try:
+        key = attacker.restoration_key()
+    except Exception as e:  # noqa: BLE001 - a plugin's claim that fails is no claim
+        log.warning("%s.restoration_key raised %s: %s; restored on its own", attacker.name, type(e).__name__, e)
+        return None
+    return key if isinstance(key, str) else None
 
 
 def resident_gb() -> float:
@@ -410,20 +466,23 @@ def fit_readers(target: Target, readers: Sequence[attacks.Reader], cfg: RunConfi
 
 
 def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
-               images: torch.Tensor | Sequence[torch.Tensor], cfg: RunConfig, rows: RowBuilder, out: Attacked) -> None:
+               images: torch.Tensor | Sequence[torch.Tensor], cfg: RunConfig, rows: RowBuilder, out: Attacked,
+               known: ReadResult | None = None) -> ReadResult | None:
     """Read `images` (the sensor's when `restorer` is None, else that restorer's output; plate
-    windows when the target has them) with one fitted reader and score the chain."""
+    windows when the target has them) with one fitted reader and score the chain. `known`: that read
+    already made, of the same images (a twin restorer's, ``Restored``); it is scored instead of reading.
+    Returns the read (None where the chain was not read)."""
     reader = ready.reader
     chain = reader.name if restorer is None else chain_name(restorer, reader.name)
     if not cfg.wants(chain):  # not a chain of the run's ensemble (cfg.chains)
-        return
+        return None
     kind = "reader" if restorer is None else "reference" if restorer in out.references else "chain"
     settings = {"reader": ready.described, **({"restorer": out.described[restorer]} if restorer else {})}
     chain_rows = out.reader_rows.setdefault(reader.name, [])
     if ready.fit_error is not None:
         chain_rows.append(rows.failed(kind, chain, ready.fit_error, restorer=restorer, reader=reader.name,
                                       settings=settings))
-        return
+        return None
     # The attacker with device access segments sensor images with the lens's own network,
     # restored images with the clean one.
     segment = target.segment_sensor if restorer is None else target.segment_restored
@@ -433,13 +492,15 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
                          f"reader {reader.name!r} has nothing to read; read plates on synthetic scenes or on "
                          "cityscapes:PATH with plate annotations")
         chain_rows.append(rows.failed(kind, chain, error, restorer=restorer, reader=reader.name, settings=settings))
-        return
-    result = attempt(reader.name, "read", lambda: read_plates(reader, images, plate_scenes, cfg.profile.batch_size,
-                                                               cfg.device, segment), cfg.budget_s, target.ctx.cache_dir)
+        return None
+    result = known if known is not None else attempt(
+        reader.name, "read", lambda: read_plates(reader, images, plate_scenes, cfg.profile.batch_size, cfg.device,
+                                                 segment), cfg.budget_s, target.ctx.cache_dir)
     if isinstance(result, RowError):
         chain_rows.append(rows.failed(kind, chain, result, restorer=restorer, reader=reader.name, settings=settings))
-        return
+        return None
     outcomes, timing, out.reads[chain] = result
+    timing = dict(timing)
     if target.plates is not None:
         timing["n_frames"] = float(target.plates.n_frames)
     if restorer is None and ready.fit_s is not None:  # the reader's own row carries its fit; its chains do not
@@ -452,6 +513,7 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
                     notes={**ready.notes, LEARNS: _flag(ready.reader.learns or out.learns.get(restorer or "", False))})
     chain_rows.append(row)
     out.reader_plates.setdefault(reader.name, []).extend(plate_records(target, row, outcomes))
+    return result
 
 
 def plate_row(rows: RowBuilder, kind: str, chain: str, outcomes: list[PlateOutcome], metrics: dict[str, float],

@@ -8,6 +8,8 @@ import torch
 
 import attacks
 from attacks.base import AttackBudget, FitContext, ThreatModel
+from attacks.restorers import nafnet_known_pairs
+from attacks.restorers.nafnet_known_psf import known_psf_key
 from attacks.training import psf_restorer_training
 from benchmark.runner.sensing import sense, to_tensor
 from benchmark.scenes.loading import load_scenes
@@ -49,6 +51,8 @@ def test_a_fine_tune_that_only_hurts_hands_back_nafnet_known_psf_itself(context,
     assert report.curve.kept_step == 0
     zero_shot = attacks.load("nafnet-known-psf", backend="torch")
     zero_shot.fit(context)
+    # So the runner may restore once for both: they claim one restoration_key.
+    assert tuned.restoration_key() is not None and tuned.restoration_key() == zero_shot.restoration_key()
     with torch.no_grad():
         sensor = next(context.train_pairs())[0][:2]
         torch.testing.assert_close(tuned.restore(sensor), zero_shot.restore(sensor), atol=1e-6, rtol=0)
@@ -61,3 +65,18 @@ def test_its_start_is_the_lens_psf_where_the_known_pairs_attacker_measures_its_o
     pairs = attacks.load("nafnet-known-pairs-tuned", backend="torch").fit(context)
     assert tuned.curve is not None and pairs.curve is not None
     assert tuned.curve.scores[0] != pytest.approx(pairs.curve.scores[0], abs=1e-3)
+
+
+@pytest.mark.slow
+def test_a_fine_tune_that_moved_claims_another_restoration_key(context, monkeypatch):
+    # With no gain required, the first evaluation's weights are kept: not the zero-shot's any more.
+    real = psf_restorer_training.fine_tune
+    monkeypatch.setattr(nafnet_known_pairs, "fine_tune", lambda *a, **k: real(*a, **{**k, "min_gain_db": -1e9}))
+    tuned = attacks.load("nafnet-known-psf-tuned", backend="torch")
+    report = tuned.fit(context)
+    assert report.curve is not None and report.curve.kept_step > 0
+    zero_shot = attacks.load("nafnet-known-psf", backend="torch")
+    zero_shot.fit(context)
+    assert tuned.restoration_key() != zero_shot.restoration_key()
+    # The backend is part of the claim: ONNX Runtime's float rounding is not torch's.
+    assert zero_shot.restoration_key() != known_psf_key(zero_shot.network, zero_shot._otf, zero_shot._gain, "onnx")
