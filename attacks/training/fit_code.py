@@ -31,15 +31,15 @@ class FitCode:
 
 FIT_CODE: dict[str, FitCode] = {
     "learned-reader": FitCode("attacks.readers.learned_reader", 1,
-                              "01a691b4b10e4a794309de3f22efe76912425e2faea670c3daa822085e378756"),
+                              "12c70efbf0280b1fc65f39968066955cbfedc2cdeb09d4ff51604b11b59eaf25"),
     "learned-reader-psf": FitCode("attacks.readers.learned_reader_psf", 1,
-                                  "79c8627b05fe30521ff2f62f8553f91473bd9372696cc2c1fd631e4d3d930fb8"),
+                                  "648ad2c61de5fd7f303fe3eb3aeea6efa85b00042b21ebaef9bf176ad82d0624"),
     "nafnet-known-pairs-tuned": FitCode("attacks.restorers.nafnet_known_pairs", 2,
-                                        "560505f07261c9b68057fe61aeeb4fabb6d81e9ac01924e5d94d27715c9bbf6a"),
+                                        "f5f3744d7e37dedf6d4d1656f0da7e2724498a707d0f1d724563b7eae8e469a5"),
     "nafnet-known-psf-tuned": FitCode("attacks.restorers.nafnet_known_pairs", 2,
-                                      "560505f07261c9b68057fe61aeeb4fabb6d81e9ac01924e5d94d27715c9bbf6a"),
+                                      "f5f3744d7e37dedf6d4d1656f0da7e2724498a707d0f1d724563b7eae8e469a5"),
     "nafnet-known-psf": FitCode("attacks.restorers.nafnet_known_psf", 1,
-                                "ff8df87e2d0bd4c76a2e22e4e110c99f4f5e7368de44568d5cd2ff673ae1754e"),
+                                "51b96cadde29c6635609aad1f60c312369f94aafe09b68eabb48c9410d7d199e"),
 }
 
 
