@@ -12,12 +12,8 @@ import pytest
 import torch
 
 import attacks
-from benchmark.runner.evaluation import Attacked, PlateSet, ReadyReader, Target, gallery_windows, run_restorers
-from benchmark.store.profiles import get_profile
-from benchmark.runner.rows import RowBuilder
-from benchmark.runner.config import RunConfig
-from benchmark.scenes import load_scenes
-from benchmark.runner.sensing import to_tensor
+from benchmark.runner.evaluation import Attacked, ReadyReader, gallery_windows, run_restorers
+from window_target import small_target  # tests/window_target.py
 
 
 class _Blind(attacks.Reader):
@@ -34,17 +30,12 @@ READERS = [ReadyReader(_Blind(), None, {"name": "blind"})]
 
 @pytest.mark.slow
 def test_the_kept_scene_does_not_hold_the_restored_batch():
-    cfg = RunConfig(["fake"], None, "synthetic", get_profile("smoke"), [0])
-    scenes = load_scenes("synthetic", "val", 3, (64, 128), 0)
-    sensor = to_tensor(scenes)
-    windows = [sensor[0, :, :32, :48].clone(), sensor[1, :, 8:40, 16:80].clone()]
-    plates = PlateSet(scenes=scenes[:2], sharp=windows, sensor=windows, n_frames=2)
-    target = Target("fake", scenes, sensor, sensor, attacks.FitContext(), None, None, plates=plates)
+    cfg, target, rows, sensor, windows = small_target()
+    plates = target.plates
     out = Attacked()
     restorers = [attacks.load("raw")]
     gone = weakref.ref(restorers[0])
-    run_restorers(target, restorers, {}, cfg, RowBuilder(cfg, "fake", 0, {"lens": "fake"}, {"device": "cpu"}), out,
-                  READERS)
+    run_restorers(target, restorers, {}, cfg, rows, out, READERS)
     # Consumed: nothing of the evaluation holds a scored restorer (or its inference session) any more.
     assert restorers == [] and gone() is None
     kept = out.restored["raw"]
@@ -143,16 +134,10 @@ class _FrameCounter(attacks.Restorer):
 def test_scored_frames_are_gone_before_the_windows_are_restored():
     """A restorer's 64 restored frames (about 400 MB on quick) are scored first and dropped (but the
     sample picture's one) before its plate windows are restored and read."""
-    cfg = RunConfig(["fake"], None, "synthetic", get_profile("smoke"), [0])
-    scenes = load_scenes("synthetic", "val", 3, (64, 128), 0)
-    sensor = to_tensor(scenes)
-    windows = [sensor[0, :, :32, :48].clone(), sensor[1, :, 8:40, 16:80].clone()]
-    plates = PlateSet(scenes=scenes[:2], sharp=windows, sensor=windows, n_frames=2)
-    target = Target("fake", scenes, sensor.clone(), sensor.clone(), attacks.FitContext(), None, None, plates=plates)
+    cfg, target, rows, sensor, _ = small_target(own_copies=True)
     counter = _FrameCounter(tuple(sensor.shape))
     out = Attacked()
-    run_restorers(target, [counter], {}, cfg, RowBuilder(cfg, "fake", 0, {"lens": "fake"}, {"device": "cpu"}), out,
-                  READERS)
+    run_restorers(target, [counter], {}, cfg, rows, out, READERS)
     assert counter.alive_during_windows, "the windows were restored"
     # alive: the local `sensor`, the target's sensor and sharp scenes; not the restored batch
     assert set(counter.alive_during_windows) == {3}

@@ -8,12 +8,8 @@ import pytest
 import torch
 
 import attacks
-from benchmark.runner.config import RunConfig
-from benchmark.runner.evaluation import RESTORED_AS, Attacked, PlateSet, ReadyReader, Target, run_restorers
-from benchmark.runner.rows import RowBuilder
-from benchmark.runner.sensing import to_tensor
-from benchmark.scenes import load_scenes
-from benchmark.store.profiles import get_profile
+from benchmark.runner.evaluation import RESTORED_AS, Attacked, ReadyReader, run_restorers
+from window_target import small_target  # tests/window_target.py
 
 
 class _Keyed(attacks.Restorer):
@@ -49,16 +45,10 @@ class _MeanReader(attacks.Reader):
 
 
 def _evaluate(restorers: list[attacks.Restorer]) -> Attacked:
-    cfg = RunConfig(["fake"], None, "synthetic", get_profile("smoke"), [0])
-    scenes = load_scenes("synthetic", "val", 3, (64, 128), 0)
-    sensor = to_tensor(scenes)
-    windows = [sensor[0, :, :32, :48].clone(), sensor[1, :, 8:40, 16:80].clone()]
-    plates = PlateSet(scenes=scenes[:2], sharp=windows, sensor=windows, n_frames=2)
-    target = Target("fake", scenes, sensor, sensor, attacks.FitContext(), None, None, plates=plates)
+    cfg, target, rows, _, _ = small_target()
     out = Attacked()
     readers = [ReadyReader(_MeanReader(), None, {"name": "mean-reader"})]
-    run_restorers(target, list(restorers), {}, cfg, RowBuilder(cfg, "fake", 0, {"lens": "fake"}, {"device": "cpu"}),
-                  out, readers)
+    run_restorers(target, list(restorers), {}, cfg, rows, out, readers)
     out.finish()
     return out
 
