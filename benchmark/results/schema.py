@@ -34,6 +34,7 @@ read with `units` None, "no per-unit outcomes").
 from __future__ import annotations
 
 import dataclasses
+import gzip
 import json
 import math
 import re
@@ -469,10 +470,12 @@ def write_results(path: Path, results: Results) -> Path:
 
 
 def read_results(path: Path) -> Results:
-    """Read a results.json of any known version; errors name the file."""
+    """Read a results.json of any known version, plain or gzipped (a name ending in ``.gz``); errors name
+    the file."""
     path = Path(path)
     try:
-        return Results.from_json(json.loads(path.read_text()))
+        raw = path.read_bytes()
+        return Results.from_json(json.loads(gzip.decompress(raw) if path.name.endswith(".gz") else raw))
     except (ValueError, KeyError, TypeError) as exc:
         raise ValueError(f"{path}: not a valid results file: {exc}") from exc
 

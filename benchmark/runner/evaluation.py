@@ -309,9 +309,8 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
     error = attempt(attacker.name, "fit", lambda: attacker.fit(ctx), cfg.budget_s, root)  # normally a cache hit
     fit_s = meta.get("fit_s", time.perf_counter() - t0)  # fitted here when its task's result was not kept
     key = None if isinstance(error, RowError) else restoration_key(attacker)
-    twin = out.by_key.get(key) if key is not None else None
-    reused = twin is not None
-    if twin is not None:  # restores as an earlier restorer of this run does: scored from its output
+    twin = out.by_key.get(key) if key is not None else None  # an earlier restorer of this run with its key
+    if twin is not None:
         log.info("%s on %s restores as %s does (the same restoration_key): scored from its output",
                  attacker.name, target.lens_name, twin.name)
         restored = out.restored[twin.name]
@@ -333,8 +332,9 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
         metrics, per_image = restoration_metrics(restored, target.sharp)
         metrics["images_per_s"] = target.sharp.shape[0] / run_s
         if key is not None:
-            twin = out.by_key[key] = Restored(attacker.name, dict(metrics), per_image)
-    if target.plates is not None and not reused:
+            out.by_key[key] = Restored(attacker.name, dict(metrics), per_image)
+    record = out.by_key.get(key) if key is not None else None  # where the reads of this output are kept
+    if target.plates is not None and twin is None:
         # Of the scenes only the sample picture's first one is kept (every restorer's 64 full scenes
         # would hold gigabytes); a clone, as a slice would keep the whole batch's storage alive.
         # Scored already, the frames go before the windows are restored and read.
@@ -344,7 +344,7 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
     # Only the chains the run measures read this restorer's output (cfg.chains: the standard ensemble).
     readers = [r for r in readers if cfg.wants(chain_name(attacker.name, r.reader.name))]
     # A twin's reads of the windows are this restorer's; the windows are restored only for readers it lacks.
-    known = twin.reads if reused and twin is not None and target.plates is not None else {}
+    known = twin.reads if twin is not None and target.plates is not None else {}
     to_read = [r for r in readers if r.reader.name not in known]
     if target.plates is not None and to_read:
         windows = attempt(attacker.name, "restore", lambda: restore_windows(
@@ -362,18 +362,18 @@ def _restore_and_score(attacker: attacks.Restorer, target: Target, fitted: dict[
         out.references.add(attacker.name)
     for reader in readers:
         read = read_chain(target, reader, attacker.name, images, cfg, rows, out, known.get(reader.reader.name))
-        if twin is not None and target.plates is not None and read is not None:
-            twin.reads.setdefault(reader.reader.name, read)
+        if record is not None and target.plates is not None and read is not None:
+            record.reads.setdefault(reader.reader.name, read)
         release_free_memory()
     del restored
     if target.plates is not None and to_read:
         out.restored_plates[attacker.name] = {i: images[i] for i in gallery_windows(target.plates)}
-    elif reused and twin is not None and twin.name in out.restored_plates:
+    elif twin is not None and twin.name in out.restored_plates:
         out.restored_plates[attacker.name] = out.restored_plates[twin.name]
     del images
     metrics["fit_s"] = float(fit_s)
     notes = {**fit_notes(error), LEARNS: _flag(attacker.learns)}
-    if reused and twin is not None:
+    if twin is not None:
         notes[RESTORED_AS] = twin.name
     row = rows.row(kind, metrics, attack=attacker.name, restorer=attacker.name,
                    threat_model=attacker.threat_model.value, settings=settings, notes=notes)

@@ -26,7 +26,6 @@ Writes ``leaderboard/studies/run_pairing.json`` (merged per lens).
 from __future__ import annotations
 
 import argparse
-import gzip
 import json
 import os
 from pathlib import Path
@@ -41,6 +40,7 @@ from benchmark.results.ensemble_choice import (
     ChainEffect, ensemble_values, proposed_ensemble, removal_effects, strongest_restorer)
 from benchmark.results.entries import Entry, entry_name, read_entry
 from benchmark.results.plate_scoring import WIDTH_BINS_PX
+from benchmark.results import schema
 from benchmark.results.schema import Results, Row
 from benchmark.store.provenance import git_commit
 
@@ -179,11 +179,10 @@ def read_results(path: Path) -> Results:
     file = path / "results.json" if path.is_dir() else path
     if not file.is_file():
         raise SystemExit(f"{path}: neither a run folder holding results.json nor a results file")
-    raw = gzip.decompress(file.read_bytes()) if file.name.endswith(".gz") else file.read_bytes()
     try:
-        return Results.from_json(json.loads(raw))
-    except (ValueError, KeyError, TypeError) as e:
-        raise SystemExit(f"{file}: not a run's results ({type(e).__name__}: {e})") from e
+        return schema.read_results(file)
+    except ValueError as e:
+        raise SystemExit(f"not a run's results: {e}") from e
 
 
 def main(argv: list[str] | None = None) -> int:
