@@ -31,7 +31,7 @@ from benchmark.runner.evaluation import Attacked, ReadyReader, Target, plate_rec
 from benchmark.runner.isolation import attempt
 from benchmark.runner.rows import RowBuilder
 
-__all__ = ["PLATES_PER_LENS", "run_cascade", "wanted_readers"]
+__all__ = ["EVERY_PLATE_FROM_PX", "PLATES_PER_LENS", "run_cascade", "wanted_readers"]
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +40,8 @@ OPEN_BIN_BELOW = 0.7  # a bin where the chains before read this share or more is
 # 2-3 s a plate on 2 cores (leaderboard/studies/ideal_observer_beam.json).
 PLATES_PER_LENS = {"smoke": 0, "quick": 60, "paper": 400}  # smoke: the row, not the cost
 DEFAULT_PLATES = 60
+# From this width every unread plate of an open bin is given, whatever the count above (not on smoke).
+EVERY_PLATE_FROM_PX = {"smoke": None, "quick": 32, "paper": 32}
 
 
 def wanted(cfg: RunConfig, reader: str) -> bool:
@@ -68,10 +70,11 @@ def run_cascade(target: Target, ready: ReadyReader, cfg: RunConfig, rows: RowBui
         log.info("%s on %s: no plate windows to cascade over; not run", chain, target.lens_name)
         return
     limit = PLATES_PER_LENS.get(cfg.profile.name, DEFAULT_PLATES) if plates_per_lens is None else plates_per_lens
+    every_from = EVERY_PLATE_FROM_PX.get(cfg.profile.name, 32) if plates_per_lens is None else None
     scored = [score_scene([], scene) for scene in plates.scenes]  # every scored plate, as not read
     records = [r for r in out.plates if r["lens"] == target.lens_name and r["seed"] == rows.seed]
     share, pick = choose(records, [s.name for s in plates.scenes], [max((o.width_px for o in w), default=-1)
-                                                                     for w in scored], limit)
+                                                                     for w in scored], limit, every_from)
     t0 = time.perf_counter()
     outcomes_by_window: dict[int, list[PlateOutcome]] = {i: scored[i] for i in range(len(scored))}
     if pick:
@@ -89,7 +92,8 @@ def run_cascade(target: Target, ready: ReadyReader, cfg: RunConfig, rows: RowBui
     outcomes = [o for i in range(len(scored)) for o in outcomes_by_window[i]]
     read_now = sum(o.correct for i in pick for o in outcomes_by_window[i])
     open_bins = sorted(b for b, s in share.items() if s < OPEN_BIN_BELOW)
-    note = (f"given the {len(pick)} widest plates (at most {limit}) that no earlier chain read, in the width bins "
+    every = "" if every_from is None else f"every one from {every_from} px, narrower ones while "
+    note = (f"given the {len(pick)} widest plates ({every}at most {limit} in all) that no earlier chain read, in the width bins "
             f"{_bins_text(open_bins)} where the earlier chains read under {OPEN_BIN_BELOW:.0%}; it read {read_now} of "
             "them; every other plate counts as not read by it")
     row = plate_row(rows, "reader", chain, outcomes,
@@ -102,13 +106,14 @@ def run_cascade(target: Target, ready: ReadyReader, cfg: RunConfig, rows: RowBui
     log.info("%s on %s: %s (%.0f s)", chain, target.lens_name, note, seconds)
 
 
-def choose(records: Sequence[dict], names: Sequence[str], widths: Sequence[int], limit: int
-           ) -> tuple[dict[int, float], list[int]]:
+def choose(records: Sequence[dict], names: Sequence[str], widths: Sequence[int], limit: int,
+           every_from_px: float | None = None) -> tuple[dict[int, float], list[int]]:
     """The share of plates read per width bin by the chains before the cascade (`records`: the run's
     per-plate records so far, each with ``scene``, ``correct`` and ``width_px``), and the windows the
     cascade reads: indices into `names` / `widths` (each window's scene name and its scored plate's
     width, -1 for none) of the windows no earlier chain read whose bin is open (read under
-    OPEN_BIN_BELOW), widest first (ties: the earlier window), at most `limit`."""
+    OPEN_BIN_BELOW), widest first (ties: the earlier window): every one at least `every_from_px` wide (None:
+    none by right), then narrower ones while fewer than `limit` are chosen."""
     read = {r["scene"] for r in records if r["correct"]}
     per_bin: dict[int, set] = {}
     for r in records:
@@ -116,7 +121,9 @@ def choose(records: Sequence[dict], names: Sequence[str], widths: Sequence[int],
     share = {b: float(np.mean([s in read for s in scenes])) for b, scenes in per_bin.items()}
     open_windows = [i for i, (name, w) in enumerate(zip(names, widths))
                     if w >= 0 and name not in read and share.get(width_bin(w), 0.0) < OPEN_BIN_BELOW]
-    return share, sorted(open_windows, key=lambda i: (-widths[i], i))[:max(limit, 0)]
+    ordered = sorted(open_windows, key=lambda i: (-widths[i], i))
+    owed = sum(1 for i in ordered if every_from_px is not None and widths[i] >= every_from_px)
+    return share, ordered[:max(limit, owed, 0)]
 
 
 def _bins_text(bins: Sequence[int]) -> str:

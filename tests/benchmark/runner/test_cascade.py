@@ -36,6 +36,10 @@ def test_choose_takes_unread_plates_of_open_bins_widest_first_up_to_the_limit():
     assert pick == [1, 7, 6]
     assert choose(records, names, widths, limit=2)[1] == [1, 7]
     assert choose(records, names, [-1] * 8, limit=10)[1] == []  # windows without a scored plate
+    # From `every_from_px` every unread plate of an open bin is given, past the limit; narrower ones only within it.
+    assert choose(records, names, widths, limit=0, every_from_px=32)[1] == [1, 7]
+    assert choose(records, names, widths, limit=1, every_from_px=80)[1] == [1]
+    assert choose(records, names, widths, limit=3, every_from_px=80)[1] == [1, 7, 6]
 
 
 class Peeking(attacks.Reader):
