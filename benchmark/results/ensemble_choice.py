@@ -15,7 +15,10 @@ The rule (``keeps``): a chain stays in the standard ensemble when its removal ch
 ensemble plate accuracy by more than ``PLATE_POINTS`` points or its ensemble PSNR by more than
 ``PSNR_DB`` dB. To those it adds ``lpdr`` (the paper's detector pipeline) on the sensor image and after
 the strongest restorer (the one that is the best restorer on the most scenes of the entries), and the
-learned reader, which the rule keeps once entries hold it. ``PROPOSED_ENSEMBLE`` is what that selects on the published quick
+learned reader, which the rule keeps once entries hold it. Chains that each decide nothing alone can still
+read plates together (two readers after two restorers that read the same hard plates): on runs with per-unit
+outcomes, ``complete_ensemble`` then adds, one at a time, the chain that brings the ensemble closest to what
+every chain reads, until dropping all the others moves no lens past the thresholds. ``PROPOSED_ENSEMBLE`` is what that selects on the published quick
 entries (docs/ensemble.md, written by ``python -m benchmark.studies.ensemble_choice_study``;
 tests/benchmark/results/test_ensemble_choice.py recomputes it, so it cannot drift from the entries).
 
@@ -31,11 +34,11 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from benchmark.results.ensemble import RESTORER_KINDS, plate_ensemble, seed_scenes
+from benchmark.results.ensemble import RESTORER_KINDS, SeedPlates, plate_ensemble, seed_plates, seed_scenes
 from benchmark.results.entries import Entry
 
-__all__ = ["ChainEffect", "PLATE_POINTS", "PSNR_DB", "DOCS", "keeps", "proposed_ensemble",
-           "removal_effects", "strongest_restorer", "ensemble_values"]
+__all__ = ["ChainEffect", "Outcomes", "PLATE_POINTS", "PSNR_DB", "DOCS", "complete_ensemble", "keeps", "with_restorers",
+           "proposed_ensemble", "removal_effects", "strongest_restorer", "ensemble_values"]
 
 # The rule's thresholds: a chain whose removal moves some lens's ensemble by more than this stays.
 PLATE_POINTS = 1.0
@@ -172,3 +175,123 @@ def proposed_ensemble(effects: Sequence[ChainEffect]) -> tuple[str, ...]:
     extra = [PAPER_READER] + ([f"{strongest}>{PAPER_READER}"] if strongest else [])
     return tuple(sorted(set(keeps(effects)) | set(extra)))
 
+
+
+@dataclasses.dataclass(frozen=True)
+class Outcomes:
+    """One lens-seed's per-unit outcomes as ``complete_ensemble`` weighs them.
+
+    Attributes:
+        lens: The lens.
+        plates: Which reader chain read which readable plate (None without per-plate units).
+        restorers: The restorers with per-scene PSNR, in the run's order.
+        psnr: (n_scenes, len(restorers)) PSNR in dB (None without per-scene units).
+        pass_s: Per chain, the seconds its row measured for its pass over its images (``n_images`` /
+            ``images_per_s``; a reader chain's row holds its reader's pass; the cascade's ``cascade_s``).
+        fit_s: Per attacker, the seconds its fit took (``fit_s`` of its own row: the restorer's, or the
+            reader's on the sensor image); a chain pays it once for each attacker it is the first to use.
+    """
+
+    lens: str
+    plates: SeedPlates | None
+    restorers: tuple[str, ...]
+    psnr: np.ndarray | None
+    pass_s: dict[str, float] = dataclasses.field(default_factory=dict)
+    fit_s: dict[str, float] = dataclasses.field(default_factory=dict)
+
+    @classmethod
+    def of(cls, rows: Sequence, lens: str, seed: int) -> Outcomes:
+        """The outcomes of `lens` at `seed` in `rows` (every chain of the run)."""
+        mine = [r for r in rows if r.lens == lens and r.seed == seed]
+        scenes = seed_scenes(mine, seed)
+        pass_s, fit_s = {}, {}
+        for r in mine:
+            m = r.metrics
+            pass_s[r.attack] = float(m.get("cascade_s", 0.0)) + (
+                float(m["n_images"]) / float(m["images_per_s"]) if m.get("images_per_s") and "n_images" in m else 0.0)
+            if "fit_s" in m:
+                fit_s[r.attack] = float(m["fit_s"])
+        return cls(lens, seed_plates(mine, seed), scenes[0] if scenes else (),
+                   None if scenes is None else scenes[1], pass_s, fit_s)
+
+    @property
+    def chains(self) -> tuple[str, ...]:
+        """Every reader chain and restorer, in the run's order."""
+        return (self.plates.chains if self.plates is not None else ()) + self.restorers
+
+    def loss(self, kept: set[str]) -> tuple[float, float]:
+        """(plate accuracy in points, ensemble PSNR in dB) that every chain reaches and `kept` alone does not."""
+        points = db = 0.0
+        if self.plates is not None and self.plates.names:
+            mask = np.array([c in kept for c in self.plates.chains])
+            read = self.plates.read[mask].any(axis=0) if mask.any() else np.zeros(len(self.plates.names), bool)
+            points = 100.0 * (self.plates.ensemble.mean() - read.mean())
+        if self.psnr is not None:
+            mask = np.array([r in kept for r in self.restorers])
+            best = self.psnr.max(axis=1).mean()
+            db = float(best - (self.psnr[:, mask].max(axis=1).mean() if mask.any() else 0.0))
+        return float(points), db
+
+
+def _with_parts(chain: str, restorers: set[str]) -> set[str]:
+    """A chain and the restorer whose output it reads (a reader chain after a restorer needs that restorer)."""
+    head = chain.split(">")[0]
+    return {chain, head} if ">" in chain and head in restorers else {chain}
+
+
+def _attackers(chain: str) -> set[str]:
+    """The attackers a chain runs: ``restorer>reader`` both, ``cascade:reader`` the reader, else itself."""
+    return set(chain.removeprefix("cascade:").split(">"))
+
+
+def _cost(outcomes: Outcomes, new: set[str], kept: set[str]) -> float:
+    """Seconds that running the chains `new` beside `kept` adds on one lens-seed: their passes, and the fits of
+    the attackers no kept chain runs yet."""
+    used = set().union(*(_attackers(c) for c in kept)) if kept else set()
+    fresh = set().union(*(_attackers(c) for c in new)) - used
+    return sum(outcomes.pass_s.get(c, 0.0) for c in new) + sum(outcomes.fit_s.get(a, 0.0) for a in fresh)
+
+
+def with_restorers(chains: Iterable[str], outcomes: Sequence[Outcomes]) -> set[str]:
+    """`chains` and the restorers (of `outcomes`) whose output their reader chains read."""
+    restorers = {r for o in outcomes for r in o.restorers}
+    return set().union(*(_with_parts(c, restorers) for c in chains))
+
+
+def complete_ensemble(start: Iterable[str], outcomes: Sequence[Outcomes]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(chains, the ones added in turn): `start` with the restorers its reader chains read, and then, one at a time,
+    the chain (with its restorer) that most reduces the excess over the rule's thresholds of what dropping every
+    other chain costs (summed over `outcomes` in units of the thresholds) per second of what it adds (``_cost``,
+    summed over `outcomes`, at least 1 s); ties go to the run's order. It stops when no lens-seed's loss
+    exceeds ``PLATE_POINTS`` or ``PSNR_DB``. Each step strictly reduces the excess (a chain that reads a plate
+    the kept ones miss recovers it), so it ends."""
+    restorers = {r for o in outcomes for r in o.restorers}
+    kept = with_restorers(start, outcomes)
+
+    def excess(chains: set[str]) -> float:
+        total = 0.0
+        for o in outcomes:
+            points, db = o.loss(chains)
+            # (a loss exactly at a threshold is within it; 1e-9 absorbs the rounding of the means)
+            total += max(0.0, points / PLATE_POINTS - 1.0 - 1e-9) + max(0.0, db / PSNR_DB - 1.0 - 1e-9)
+        return total
+
+    order = list(dict.fromkeys(c for o in outcomes for c in o.chains))
+    added: list[str] = []
+    current = excess(kept)
+    while current > 0.0:
+        scored = []
+        for rank, chain in enumerate(order):
+            if chain in kept:
+                continue
+            new = _with_parts(chain, restorers) - kept
+            after = excess(kept | new)
+            if after < current:
+                cost = max(1.0, sum(_cost(o, new, kept) for o in outcomes))
+                scored.append((-(current - after) / cost, rank, chain, after))
+        if not scored:
+            break
+        _, _, chain, current = min(scored)
+        kept |= _with_parts(chain, restorers)
+        added.append(chain)
+    return tuple(sorted(kept)), tuple(added)

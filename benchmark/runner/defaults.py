@@ -36,14 +36,22 @@ MEASURED_READERS: tuple[str, ...] = ("learned-reader-psf",)
 # A reader named "cascade:<reader>" runs after every other chain, only on the plates none of them read
 # (benchmark.runner.cascade): the maximum-likelihood reader costs seconds a plate.
 CASCADE: tuple[str, ...] = (cascade_name("ideal-observer"),)
-# The rule re-applied to fresh runs (seed 0) of the five privacy lenses that measured the proposal, the
-# measured additions and readers, the learned reader and the cascade (leaderboard/studies/run_pairing.json
-# "proposal", `python -m benchmark.studies.run_pairing_study --run ...`; docs/ensemble.md): the chains whose
-# removal moved some lens's ensemble past the rule's thresholds, and the paper's lpdr on the sensor image and
-# after the strongest restorer; the twelve others, dropped together, moved no lens's ensemble at all. In the
-# order a run evaluates them, the cascade last. tests/benchmark/runner/test_standard_ensemble.py recomputes it.
-RUN_PROPOSAL: tuple[str, ...] = ("lpdr", "nafnet-known-psf", "nafnet-known-psf>lpdr", "learned-reader-psf",
-                                 LEARNED_READER, *CASCADE)
+# The rule re-applied to the full cross product (seed 0) of the five privacy lenses: every attacker that runs by
+# default, every reader after every restorer, and the cascade (leaderboard/studies/cross_product, kept in git;
+# leaderboard/studies/run_pairing.json "proposal", `python -m benchmark.studies.run_pairing_study --run ...`;
+# docs/ensemble.md): the chains whose removal moved some lens's ensemble past the rule's thresholds, the paper's
+# lpdr on the sensor image and after the strongest restorer, then the chains that read plates only together,
+# added cheapest per point first (``complete_ensemble``) until dropping all the others moves no lens past
+# the thresholds, with the restorers they read. In the order a run evaluates them, the cascade last.
+# tests/benchmark/runner/test_standard_ensemble.py recomputes it from the kept runs.
+RUN_PROPOSAL: tuple[str, ...] = (
+    "demosaic-vng", "gray-world", "identity", "nafnet-generic", "nafnet-known-psf", "nafnet-known-psf-tuned",
+    "training-adversary", "wiener-known-psf",
+    "demosaic-vng>learned-reader", "gray-world>learned-reader", "nafnet-known-psf>learned-reader",
+    "wiener-known-psf>learned-reader",
+    "demosaic-vng>learned-reader-psf", "gray-world>learned-reader-psf", "identity>learned-reader-psf",
+    "nafnet-generic>learned-reader-psf", "training-adversary>learned-reader-psf", "wiener-known-psf>learned-reader-psf",
+    "lpdr", "nafnet-known-psf>lpdr", *CASCADE)
 # The run's default chains: the rule's, with the uncorrected image as a reference restorer (no chain reads it).
 STANDARD_ENSEMBLE: tuple[str, ...] = RUN_PROPOSAL[:-len(CASCADE)] + ("raw",) + CASCADE
 

@@ -179,18 +179,27 @@ def _fresh_runs(directory: Path) -> list[str]:
                                 else f"`{c}` {_signed(e['psnr_db'], 3)} dB" for c, e in effects.items() if e["matters"]),
                       "" if joint.get("plate_points") is None else _signed(-joint["plate_points"], 2),
                       "" if joint.get("psnr_db") is None else _signed(-joint["psnr_db"], 3)])
+    added = proposal.get("added_jointly", [])
     return ["## Re-chosen on fresh runs", "",
-            f"The rule applied to fresh `python -m benchmark run --lens L --seeds 0` runs of {', '.join(proposal['lenses'])}"
-            " with the proposal above, the measured additions and the cascade (`leaderboard/studies/run_pairing.json`, "
-            "`python -m benchmark.studies.run_pairing_study --run ...`). A chain none of these runs held (the rest of "
-            "the cross product) had no say. The cascade reads only the plates the chains before it missed, so a "
-            "chain's removal effect overstates what dropping it costs (the cascade would then read some of its "
-            "plates).", "",
+            f"The rule applied to fresh runs of {', '.join(proposal['lenses'])} at seed 0 "
+            "(`leaderboard/studies/run_pairing.json`, `python -m benchmark.studies.run_pairing_study --run ...`; the "
+            "runs' results are kept in `leaderboard/studies/cross_product`). A chain none of these runs held had no "
+            "say. The cascade reads only the plates the chains before it missed, so a chain's removal effect "
+            "overstates what dropping it costs (the cascade would then read some of its plates).", "",
             _table(["lens", "run (date)", "chains past the rule: removal effect",
                     "every dropped chain removed at once, plate acc pt", "the same, PSNR dB"], lines), "",
-            f"Strongest restorer: `{proposal['strongest_restorer']}`. Kept ({len(proposal['chains'])}): "
-            + ", ".join(f"`{c}`" for c in proposal["chains"]) + f". Dropped ({len(proposal['dropped'])}): "
-            + ", ".join(f"`{c}`" for c in proposal["dropped"]) + ". This is `benchmark.runner.defaults.RUN_PROPOSAL`.", ""]
+            f"Strongest restorer: `{proposal['strongest_restorer']}`. The rule keeps "
+            + ", ".join(f"`{c}`" for c in proposal.get("rule", proposal["chains"])) + ". "
+            + ("Chains that each decide nothing alone read plates together (the same reader after several "
+               "restorers, each near its threshold on a few plates): with the rule's chains alone the runs lost "
+               + "; ".join(f"{lens} {v['plate_points']:.2f} pt" for lens, v in proposal.get("rule_joint_removal", {}).items()
+                           if v.get("plate_points") is not None)
+               + " of their plates (from every width), so the chains that recover most per measured second were added one at a "
+               "time (`complete_ensemble` in benchmark/results/ensemble_choice.py) until none did: "
+               + ", ".join(f"`{c}`" for c in added) + ", with the restorers they read. " if added else "")
+            + f"Kept ({len(proposal['chains'])}): " + ", ".join(f"`{c}`" for c in proposal["chains"])
+            + f". Dropped ({len(proposal['dropped'])}): " + ", ".join(f"`{c}`" for c in proposal["dropped"])
+            + ". This is `benchmark.runner.defaults.RUN_PROPOSAL`.", ""]
 
 
 def _joint_verdict(entries: Sequence[Entry], proposed: Sequence[str]) -> str:

@@ -29,6 +29,7 @@ import argparse
 import json
 import os
 from pathlib import Path
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -37,7 +38,8 @@ from benchmark.results import stats
 from benchmark.results.attack_gap import attack_gaps, gap_curves
 from benchmark.results.ensemble import plate_ensemble, seed_plates, seed_scene_names, seed_scenes
 from benchmark.results.ensemble_choice import (
-    ChainEffect, ensemble_values, proposed_ensemble, removal_effects, strongest_restorer)
+    ChainEffect, Outcomes, complete_ensemble, ensemble_values, proposed_ensemble, removal_effects, strongest_restorer,
+    with_restorers)
 from benchmark.results.entries import Entry, entry_name, read_entry
 from benchmark.results.plate_scoring import WIDTH_BINS_PX
 from benchmark.results import schema
@@ -153,24 +155,31 @@ def against(ours: list[Row], folder: Path, theirs: list[Row], seed: int, study: 
 def proposal(record: dict[str, Any], runs: dict[str, list[Row]]) -> dict[str, Any]:
     """The rule of ``benchmark.results.ensemble_choice`` applied to the fresh runs' chain effects of the
     privacy lenses (``PRIVACY_LENSES``, as far as the record holds them): the chains it keeps plus the paper's
-    ``lpdr`` on the sensor image and after the strongest restorer; and, per lens whose run rows are at hand,
-    what dropping every other chain together costs the run's ensemble (plates from every width, points;
-    PSNR, dB), so that chains that each decide nothing alone do not hide a plate they read only together."""
+    ``lpdr`` on the sensor image and after the strongest restorer (``rule``), completed on the runs at hand
+    (``complete_ensemble``: chains that decide nothing alone but read plates together, and the restorers the
+    reader chains read); and, per lens whose run rows are at hand, what dropping every other chain together
+    costs the run's ensemble (plates from every width, points; PSNR, dB)."""
     lenses = [lens for lens in PRIVACY_LENSES if "chain_effects" in record["lenses"].get(lens, {})]
     effects = [ChainEffect(lens, "quick", "synthetic", chain, e["kind"], e["first"], e["only"], e["best_scenes"],
                            e["plate_points"], e["psnr_db"])
                for lens in lenses for chain, e in record["lenses"][lens]["chain_effects"].items()]
-    chains = proposed_ensemble(effects)
-    joint = {}
-    for lens, rows in runs.items():
-        if lens not in lenses:
-            continue
-        run = _as_entry(rows, lens)
-        (plates_all, psnr_all), (plates_kept, psnr_kept) = ensemble_values(run), ensemble_values(run, set(chains))
-        joint[lens] = {"plate_points": None if plates_all is None else round(plates_all - (plates_kept or 0.0), 3),
-                       "psnr_db": None if psnr_all is None else round(psnr_all - (psnr_kept or 0.0), 4)}
-    return {"lenses": lenses, "strongest_restorer": strongest_restorer(effects), "chains": list(chains),
-            "dropped": sorted({e.attack for e in effects} - set(chains)), "joint_removal": joint}
+    rule = proposed_ensemble(effects)
+    at_hand = {lens: rows for lens, rows in runs.items() if lens in lenses}
+    outcomes = [Outcomes.of(rows, lens, int(record.get("seed", 0))) for lens, rows in at_hand.items()]
+    chains, added = complete_ensemble(rule, outcomes)
+    rule_alone = with_restorers(rule, outcomes)
+
+    def removal(run: Entry, kept: Sequence[str]) -> dict[str, float | None]:
+        (plates_all, psnr_all), (plates_kept, psnr_kept) = ensemble_values(run), ensemble_values(run, set(kept))
+        return {"plate_points": None if plates_all is None else round(plates_all - (plates_kept or 0.0), 3),
+                "psnr_db": None if psnr_all is None else round(psnr_all - (psnr_kept or 0.0), 4)}
+
+    runs_at_hand = {lens: _as_entry(rows, lens) for lens, rows in at_hand.items()}
+    return {"lenses": lenses, "strongest_restorer": strongest_restorer(effects), "rule": list(rule),
+            "rule_joint_removal": {lens: removal(run, rule_alone) for lens, run in runs_at_hand.items()},
+            "added_jointly": list(added), "chains": list(chains),
+            "dropped": sorted({e.attack for e in effects} - set(chains)),
+            "joint_removal": {lens: removal(run, chains) for lens, run in runs_at_hand.items()}}
 
 
 def read_results(path: Path) -> Results:

@@ -91,7 +91,7 @@ def test_list_text_shows_threat_model_and_default(capsys):
     lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.startswith("  ")}
     assert "lens-access" in lines["ideal-observer"] and " standard " in lines["ideal-observer"]
     assert "sensor-access" in lines["lpdr-craft"] and " named " in lines["lpdr-craft"]
-    assert "sensor-access" in lines["identity"] and " all-chains " in lines["identity"]
+    assert "sensor-access" in lines["lpdr-oracle"] and " all-chains " in lines["lpdr-oracle"]
     assert "lens-access" in lines["learned-reader"] and " standard " in lines["learned-reader"]
 
 

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from benchmark.results.ensemble import plate_ensemble, scene_ensemble
-from benchmark.results.ensemble_choice import keeps, proposed_ensemble, removal_effects, strongest_restorer
+from benchmark.results.ensemble_choice import (
+    PLATE_POINTS, Outcomes, complete_ensemble, keeps, proposed_ensemble, removal_effects, strongest_restorer)
 from benchmark.results.entries import LEADERBOARD, Entry
 from benchmark.results.schema import Row, Units
 from benchmark.runner.defaults import PROPOSED_ENSEMBLE
@@ -117,3 +118,30 @@ def test_a_chain_that_reads_a_plate_no_other_reads_starts_to_decide(toy):
     assert (effects["x>a"].first, effects["x>a"].only) == (1, 1)
     assert effects["x>a"].plate_points == pytest.approx(10.0) and effects["x>a"].matters
     assert effects["w>a"].only == 2  # plate 5 is its own now
+
+
+def _timed(row: Row, seconds: float, fit_s: float = 0.0) -> Row:
+    return dataclasses.replace(row, metrics={**row.metrics, "n_images": 10.0, "images_per_s": 10.0 / seconds,
+                                             "fit_s": fit_s})
+
+
+def test_chains_that_read_plates_only_together_are_completed_cheapest_first():
+    # 100 plates. `a` reads 0-59; `r>b` and `q>b` both read 60-62 (each alone is redundant: removal effect 0,
+    # together 3 points); `r>b` needs restorer `r` (fit 100 s), `q>b` restorer `q` (fit 1 s): the cheap one is added.
+    # `z` reads 63 alone (1 point, within the threshold, at 10 s): not needed once `q>b` is in.
+    def reads(idx):
+        return [int(i in idx) for i in range(100)]
+    rows = [_timed(_reader("a", 0, reads(range(60))), 5.0),
+            _timed(_reader("r>b", 0, reads(range(60, 63))), 5.0), _timed(_reader("q>b", 0, reads(range(60, 63))), 5.0),
+            _timed(_reader("z", 0, reads([63])), 10.0),
+            _timed(_restorer("r", 0, [20.0, 20.0]), 2.0, fit_s=100.0), _timed(_restorer("q", 0, [20.0, 20.0]), 2.0, 1.0),
+            _timed(_restorer("s", 0, [21.0, 21.0]), 2.0)]
+    effects = {e.attack: e for e in removal_effects([_entry(rows)])}
+    assert not effects["r>b"].matters and not effects["q>b"].matters  # the single-removal rule keeps neither
+    outcomes = [Outcomes.of(rows, "L", 0)]
+    assert outcomes[0].loss({"a", "s"}) == pytest.approx((4.0, 0.0)) and outcomes[0].loss({"a"})[1] == 21.0
+    chains, added = complete_ensemble(["a", "s"], outcomes)
+    assert added == ("q>b",) and set(chains) == {"a", "s", "q>b", "q"}
+    assert outcomes[0].loss(set(chains))[0] == pytest.approx(1.0) and PLATE_POINTS == 1.0
+    # A start that already reads everything needs nothing; a chain after a restorer brings the restorer.
+    assert complete_ensemble(["a", "r>b", "z", "s"], outcomes) == (("a", "r", "r>b", "s", "z"), ())

@@ -53,7 +53,8 @@ def test_an_empty_cache_dry_run_gives_a_total_and_the_machine(tmp_path, monkeypa
                                         ("utility", None, "co-designed"), ("evaluate", None, "co-designed"),
                                         ("fit", "*", None)])
     installed = {t.key for t in todo if t.estimate.installed}
-    assert installed == {"clean-utility_s0", "lens_s0_gp"}
+    # The shipped lens, the clean net and, at seed 0, the generic NAFNet's weights are installed, not fitted.
+    assert installed == {"clean-utility_s0", "lens_s0_gp", "fit_s0_gp_nafnet-generic"}
     summary = plan.render().splitlines()[-1]
     match = re.search(r"estimated total (\d+) s \(([\d.]+) min\) for (\d+) of them", summary)
     assert match, summary
@@ -65,7 +66,8 @@ def test_an_empty_cache_dry_run_gives_a_total_and_the_machine(tmp_path, monkeypa
     total = benchmark.api.task_costs.total([(t.seed, t.lens, t.estimate) for t in other.tasks])
     per_lens = {kind: sum(figures[(k, None, kind)] for k in ("lens", "utility", "evaluate")) + figures[("fit", "*", None)]
                 for kind in ("fixed", "co-designed")}
-    shared = figures[("sharp", None, None)] + figures[("spectrum", None, None)]
+    # the generic NAFNet's fit (shipped only for seed 0) once per seed, shared by the lenses
+    shared = figures[("sharp", None, None)] + figures[("spectrum", None, None)] + figures[("fit", "nafnet-generic", None)]
     assert total.seconds == pytest.approx(shared + 2 * figures[("bound", None, None)] + sum(per_lens.values()))
     assert (total.unknown, total.installed) == (0, 1)  # the clean net ships for every seed
     codesign = next(t for t in quick["tasks"] if t["kind"] == "lens" and t["lens"] == "co-designed")

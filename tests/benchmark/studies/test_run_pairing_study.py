@@ -67,6 +67,8 @@ def test_a_run_with_other_plates_is_reported_not_paired():
 
 
 def test_the_proposal_keeps_what_matters_and_drops_jointly_no_less_than_alone():
+    from benchmark.results.ensemble_choice import PLATE_POINTS, PSNR_DB
+
     gp = entry("gp")
     rows = [r for r in gp.rows if r.seed == 0]
     record = {"lenses": {"gp": pair_lens(gp.rows, "gp", 0, None)}}
@@ -82,3 +84,6 @@ def test_the_proposal_keeps_what_matters_and_drops_jointly_no_less_than_alone():
     joint = found["joint_removal"]["gp"]
     assert joint["plate_points"] >= max(effects[c]["plate_points"] for c in dropped) - 1e-9
     assert joint["psnr_db"] >= max(effects[c]["psnr_db"] for c in dropped) - 1e-9
+    # ... and the completion leaves that within the rule's thresholds; the rule's own chains are all kept.
+    assert joint["plate_points"] <= PLATE_POINTS and joint["psnr_db"] <= PSNR_DB
+    assert set(found["rule"]) <= kept and set(found["added_jointly"]) <= kept
