@@ -223,6 +223,8 @@ def main(argv: list[str] | None = None) -> int:
             if not (LEADERBOARD / "entries" / entry_name(lens, "quick", "synthetic")).exists():
                 print(f"{lens}: no published quick entry; skipped")
                 continue
+            if not any(r.lens == lens for r in results.rows):
+                continue  # a lens named with --lens that this run does not hold (another --run does)
             if lens in runs and lens not in PRIVACY_LENSES:
                 continue  # a reference lens (sharp) every run holds: the first run's
             runs[lens] = [r for r in results.rows if r.lens == lens and r.seed == args.seed]

@@ -51,7 +51,7 @@ def test_an_empty_cache_dry_run_gives_a_total_and_the_machine(tmp_path, monkeypa
                if t.get("attackers", "standard") == "standard"}
     expected = sum(figures[k] for k in [("sharp", None, None), ("spectrum", None, None), ("bound", None, None),
                                         ("utility", None, "co-designed"), ("evaluate", None, "co-designed"),
-                                        ("fit", "*", None)])
+                                        ("fit", "*", None), ("fit", "nafnet-known-psf-tuned", "co-designed")])
     installed = {t.key for t in todo if t.estimate.installed}
     # The shipped lens, the clean net and, at seed 0, the generic NAFNet's weights are installed, not fitted.
     assert installed == {"clean-utility_s0", "lens_s0_gp", "fit_s0_gp_nafnet-generic"}
@@ -65,7 +65,7 @@ def test_an_empty_cache_dry_run_gives_a_total_and_the_machine(tmp_path, monkeypa
     other = benchmark.plan(lenses=["gp", "defocus"], profile="quick", seeds=[1])
     total = benchmark.api.task_costs.total([(t.seed, t.lens, t.estimate) for t in other.tasks])
     per_lens = {kind: sum(figures[(k, None, kind)] for k in ("lens", "utility", "evaluate")) + figures[("fit", "*", None)]
-                for kind in ("fixed", "co-designed")}
+                + figures[("fit", "nafnet-known-psf-tuned", kind)] for kind in ("fixed", "co-designed")}
     # the generic NAFNet's fit (shipped only for seed 0) once per seed, shared by the lenses
     shared = figures[("sharp", None, None)] + figures[("spectrum", None, None)] + figures[("fit", "nafnet-generic", None)]
     assert total.seconds == pytest.approx(shared + 2 * figures[("bound", None, None)] + sum(per_lens.values()))

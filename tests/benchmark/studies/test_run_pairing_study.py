@@ -87,3 +87,18 @@ def test_the_proposal_keeps_what_matters_and_drops_jointly_no_less_than_alone():
     # ... and the completion leaves that within the rule's thresholds; the rule's own chains are all kept.
     assert joint["plate_points"] <= PLATE_POINTS and joint["psnr_db"] <= PSNR_DB
     assert set(found["rule"]) <= kept and set(found["added_jointly"]) <= kept
+
+
+def test_runs_of_different_lenses_named_together_each_pair_their_own_lens(tmp_path):
+    """`--run A --run B --lens a --lens b`: a run that does not hold a named lens leaves that lens to the run
+    that does (it once replaced it with nothing)."""
+    for lens in ("gp", "defocus"):
+        e = entry(lens)
+        (tmp_path / lens).mkdir()
+        (tmp_path / lens / "results.json").write_text(json.dumps(Results(e.rows, e.settings).to_json()))
+    out = tmp_path / "pairing.json"
+    assert run_pairing_study.main(["--run", str(tmp_path / "gp"), "--run", str(tmp_path / "defocus"), "--lens", "gp",
+                                   "--lens", "defocus", "--out", str(out)]) == 0
+    written = json.loads(out.read_text())["lenses"]
+    for lens in ("gp", "defocus"):
+        assert written[lens]["plates"]["paired"] and written[lens]["run"]["folder"] == str(tmp_path / lens)
