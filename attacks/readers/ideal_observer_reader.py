@@ -25,12 +25,18 @@ search (its sweeps take other paths: on a clean test plate beam 6 stopped at a s
 than the true one, which beams 3, 4 and 8 found); the strings are scored once and shared, so the widths
 together find a string at least as likely as each width alone. Whether the plate has the EU band is
 decided first, by the best likelihood of the starting strings with and without it. Cost: about
-3 x beam x 134 renderings per sweep and width. The default search (beams 3 then 6, at most 6 sweeps) against beam 3 with 4 sweeps on the same plates, and what
-each costs: leaderboard/studies/ideal_observer_beam.json (benchmark.studies.observer_beam_study).
+3 x beam x 134 renderings per sweep and width. The boxes of one ``read`` call are searched in `workers`
+forked processes (one torch thread each; default: the CPUs this process may use): the rendering holds
+the GIL, so threads do not help; a box's read does not depend on which process searched it. The default
+search (beams 3 then 6, at most 6 sweeps) against beam 3 with 4 sweeps on the same plates, and what each
+costs: leaderboard/studies/ideal_observer_beam.json (benchmark.studies.observer_beam_study).
 """
 
 from __future__ import annotations
 
+import multiprocessing
+import os
+import sys
 from typing import Any, ClassVar
 
 import numpy as np
@@ -45,6 +51,9 @@ from lenses.sensor import bayer_masks
 __all__ = ["IdealObserverReader"]
 
 REFERENCE_BACKGROUND = (236, 236, 228)  # rendering colour; the per-channel gain absorbs the true tint
+# What the forked workers of one read call search in: (the reader, the raw electron images); set only
+# while that call's pool runs (the children inherit it by fork).
+_FORKED: tuple[IdealObserverReader, Tensor] | None = None
 
 
 class IdealObserverReader(Reader):
@@ -54,6 +63,8 @@ class IdealObserverReader(Reader):
         beams: the beam widths searched in turn from each start (strings kept per round; 1: coordinate ascent).
         max_sweeps: at most this many sweeps over the positions, per width and start.
         min_width_px: narrower boxes are not read (nothing to read, and the runner scores none).
+        workers: processes that search the boxes of a read call (None: the CPUs this process may use;
+            1: in this process). Results do not depend on it.
     """
 
     name: ClassVar[str] = "ideal-observer"
@@ -64,9 +75,13 @@ class IdealObserverReader(Reader):
     # plates no other chain read (benchmark.runner.cascade); --attack ideal-observer reads every plate.
     run_by_default: ClassVar[bool] = False
 
-    def __init__(self, beams: tuple[int, ...] = (3, 6), max_sweeps: int = 6, min_width_px: int = 8) -> None:
+    def __init__(self, beams: tuple[int, ...] = (3, 6), max_sweeps: int = 6, min_width_px: int = 8,
+                 workers: int | None = None) -> None:
         if not beams or min(beams) < 1 or max_sweeps < 1:
             raise ValueError(f"beams (one width or more) and max_sweeps must be >= 1, got {beams}, {max_sweeps}")
+        if workers is not None and workers < 1:
+            raise ValueError(f"workers must be >= 1 (or None: the CPUs this process may use), got {workers}")
+        self.workers = workers
         self.beams = tuple(int(b) for b in beams)
         self.max_sweeps = max_sweeps
         self.min_width_px = min_width_px
@@ -114,17 +129,43 @@ class IdealObserverReader(Reader):
                              f"per image ({images.shape[0]} images); got {None if boxes is None else len(boxes)}")
         cam = self._camera
         raw = self._raw_electrons(images.detach().to(torch.float64).cpu(), cam)
-        out = []
-        for electrons, image_boxes in zip(raw, boxes):
-            reads = []
+        jobs = []  # (image, box)
+        for i, image_boxes in enumerate(boxes):
             for box in image_boxes:
                 x0, y0, x1, y1 = (int(round(v)) for v in box)
-                if x1 - x0 < self.min_width_px or y1 - y0 < 2:
-                    continue
-                text, score = self.read_box(electrons, (x0, y0, x1, y1))
-                reads.append(PlateRead(text, (float(x0), float(y0), float(x1), float(y1)), score))
-            out.append(reads)
+                if x1 - x0 >= self.min_width_px and y1 - y0 >= 2:
+                    jobs.append((i, (x0, y0, x1, y1)))
+        out: list[list[PlateRead]] = [[] for _ in range(images.shape[0])]
+        for (i, box), (text, score) in zip(jobs, self._search_boxes(raw, jobs)):
+            out[i].append(PlateRead(text, tuple(float(v) for v in box), score))  # type: ignore[arg-type]
         return out
+
+    def _worker_count(self, n_jobs: int) -> int:
+        """Processes for `n_jobs` boxes: `workers` (None: the CPUs this process may use), at most one a box,
+        and 1 where fork is not the platform's safe default (Linux only)."""
+        if not sys.platform.startswith("linux"):
+            return 1
+        wanted = self.workers if self.workers is not None else len(os.sched_getaffinity(0))
+        return max(1, min(wanted, n_jobs))
+
+    def _search_boxes(self, raw: Tensor, jobs: list[tuple[int, tuple[int, int, int, int]]]) -> list[tuple[str, float]]:
+        """``read_box`` of every job, in this process or in forked workers (one torch thread each), in order;
+        the pool is closed and its processes reaped before this returns."""
+        n = self._worker_count(len(jobs))
+        if n <= 1:
+            return [self.read_box(raw[i], box) for i, box in jobs]
+        global _FORKED
+        _FORKED = (self, raw)
+        try:
+            pool = multiprocessing.get_context("fork").Pool(n, initializer=torch.set_num_threads, initargs=(1,))
+            try:
+                found = pool.map(_read_forked, jobs, chunksize=1)
+            finally:
+                pool.close()
+                pool.join()
+        finally:
+            _FORKED = None
+        return found
 
     @staticmethod
     def _raw_electrons(images: Tensor, cam: dict[str, Any]) -> Tensor:
@@ -169,6 +210,14 @@ class IdealObserverReader(Reader):
                 beam = sorted(pool, key=seen.__getitem__, reverse=True)[:width]
             if beam[0] == best_before:
                 break
+
+
+def _read_forked(job: tuple[int, tuple[int, int, int, int]]) -> tuple[str, float]:
+    """One box's read in a forked worker of ``IdealObserverReader._search_boxes``."""
+    assert _FORKED is not None, "a worker of _search_boxes reads only inside its pool"
+    reader, raw = _FORKED
+    i, box = job
+    return reader.read_box(raw[i], box)
 
 
 def _starting_strings(alphabets: list[str]) -> list[str]:

@@ -62,3 +62,27 @@ def test_registered_but_run_only_when_named():
     """Seconds per plate: `python -m benchmark list` shows it, a default run leaves it out."""
     assert attacks.available()["ideal-observer"] == "attacks.readers.ideal_observer_reader:IdealObserverReader"
     assert IdealObserverReader.run_by_default is False
+
+
+@pytest.mark.slow
+def test_reads_in_forked_workers_equal_the_reads_in_this_process_and_leave_no_process():
+    from benchmark.runner.isolation import child_pids
+
+    rng = np.random.default_rng(2)
+    plates = [(random_plate_text(rng), (10, 20, 58, 30), (236, 236, 228), False),
+              (random_plate_text(rng), (91, 41, 155, 55), (240, 210, 40), True),
+              (random_plate_text(rng), (170, 60, 250, 77), (236, 236, 228), True)]
+    lens = lenses.load("defocus")
+    sensor = clean_sensor(lens, street(plates))
+    images = torch.cat([sensor, sensor])
+    hints = ReadHints(plate_boxes=[[plates[0][1], plates[1][1]], [plates[2][1], (0, 0, 4, 4)]])  # a box too small
+    reads = {}
+    for workers in (1, 2):
+        reader = IdealObserverReader(workers=workers)
+        reader.fit(attacks.FitContext(lens=lens))
+        before = child_pids()
+        reads[workers] = reader.read(images, hints)
+        assert child_pids() <= before  # the pool's processes are reaped before read returns
+    assert reads[1] == reads[2] and [len(r) for r in reads[1]] == [2, 1]
+    with pytest.raises(ValueError, match="workers"):
+        IdealObserverReader(workers=0)
