@@ -54,16 +54,16 @@ def test_publish_replaces_entries_whole_and_resumes_from_the_cache(tmp_path, cap
     leaderboard.publish_run(old.output.rows, get_profile("smoke").to_dict(), old.output.lens_info, tmp_path / "old",
                             board, old.output.settings)
     entry = board / "entries" / "defocus__smoke__synthetic.json"
-    assert "identity" in {r.attack for r in read_entry(entry).rows}
+    assert {"lpdr-oracle", "identity>lpdr-oracle"} <= {r.attack for r in read_entry(entry).rows}
     argv = ["publish", "--lens", "defocus", "--profile", "smoke", "--seeds", "0", "--dir", str(board), "--out", str(out)]
     assert cli.main(argv) == 0
     printed = capsys.readouterr().out
     assert "publish defocus (smoke, seeds 0):" in printed and "published 2 leaderboard entries" in printed
     attacks = {r.attack for r in read_entry(entry).rows if r.kind in ("restorer", "reader", "chain", "reference")}
-    # The older run's identity rows are gone; only the standard ensemble's chains are there (the known-PSF
+    # The older run's lpdr-oracle rows are gone; only the standard ensemble's chains are there (the known-PSF
     # and learned attackers of a fixed lens).
-    assert attacks <= set(STANDARD_ENSEMBLE) and "identity" not in attacks
-    assert {"learned-reader", "learned-reader-psf", "nafnet-known-psf>lpdr"} <= attacks
+    assert attacks <= set(STANDARD_ENSEMBLE) and not {"lpdr-oracle", "identity>lpdr-oracle"} & attacks
+    assert {"demosaic-vng>learned-reader", "demosaic-vng>learned-reader-psf", "nafnet-known-psf>lpdr"} <= attacks
     # Run again: every task comes from the cache.
     plan = benchmark.plan(["defocus"], profile="smoke", seeds=[0])
     assert all(t.cached for t in plan.tasks)
