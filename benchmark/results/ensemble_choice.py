@@ -36,6 +36,7 @@ import numpy as np
 
 from benchmark.results.ensemble import RESTORER_KINDS, SeedPlates, plate_ensemble, seed_plates, seed_scenes
 from benchmark.results.entries import Entry
+from benchmark.results.schema import chain_parts
 
 __all__ = ["ChainEffect", "Outcomes", "PLATE_POINTS", "PSNR_DB", "DOCS", "complete_ensemble", "keeps", "with_restorers",
            "proposed_ensemble", "removal_effects", "strongest_restorer", "ensemble_values"]
@@ -176,7 +177,6 @@ def proposed_ensemble(effects: Sequence[ChainEffect]) -> tuple[str, ...]:
     return tuple(sorted(set(keeps(effects)) | set(extra)))
 
 
-
 @dataclasses.dataclass(frozen=True)
 class Outcomes:
     """One lens-seed's per-unit outcomes as ``complete_ensemble`` weighs them.
@@ -239,16 +239,11 @@ def _with_parts(chain: str, restorers: set[str]) -> set[str]:
     return {chain, head} if ">" in chain and head in restorers else {chain}
 
 
-def _attackers(chain: str) -> set[str]:
-    """The attackers a chain runs: ``restorer>reader`` both, ``cascade:reader`` the reader, else itself."""
-    return set(chain.removeprefix("cascade:").split(">"))
-
-
 def _cost(outcomes: Outcomes, new: set[str], kept: set[str]) -> float:
     """Seconds that running the chains `new` beside `kept` adds on one lens-seed: their passes, and the fits of
     the attackers no kept chain runs yet."""
-    used = set().union(*(_attackers(c) for c in kept)) if kept else set()
-    fresh = set().union(*(_attackers(c) for c in new)) - used
+    used = set().union(*(chain_parts(c) for c in kept)) if kept else set()
+    fresh = set().union(*(chain_parts(c) for c in new)) - used
     return sum(outcomes.pass_s.get(c, 0.0) for c in new) + sum(outcomes.fit_s.get(a, 0.0) for a in fresh)
 
 

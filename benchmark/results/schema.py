@@ -384,6 +384,11 @@ def cascade_name(reader: str) -> str:
     return f"{CASCADE_PREFIX}{reader}"
 
 
+def chain_parts(chain: str) -> list[str]:
+    """The attackers a chain of the ensemble names: "restorer>reader" -> both, "cascade:reader" -> the reader."""
+    return chain.removeprefix(CASCADE_PREFIX).split(">")
+
+
 def threat_models(rows: Iterable[Row]) -> dict[str, str | None]:
     """Each attack of `rows` (one lens's) with its threat model: a chain's is the strongest of its
     restorer's, its reader's and its own rows' (`attacks.ThreatModel.strongest`; a chain needs what

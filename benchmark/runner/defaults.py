@@ -11,7 +11,7 @@ measures unless told otherwise (``benchmark.runner.runner.standard_attackers``).
 
 from __future__ import annotations
 
-from benchmark.results.schema import CASCADE_PREFIX, cascade_name
+from benchmark.results.schema import CASCADE_PREFIX, cascade_name, chain_parts
 
 __all__ = ["CASCADE", "CASCADE_PREFIX", "LEARNED_READER", "MEASURED_ADDITIONS", "MEASURED_READERS",
            "PROPOSED_ENSEMBLE", "RUN_PROPOSAL", "STANDARD_ENSEMBLE", "chain_parts"]
@@ -54,8 +54,3 @@ RUN_PROPOSAL: tuple[str, ...] = (
     "lpdr", "nafnet-known-psf>lpdr", *CASCADE)
 # The run's default chains: the rule's, with the uncorrected image as a reference restorer (no chain reads it).
 STANDARD_ENSEMBLE: tuple[str, ...] = RUN_PROPOSAL[:-len(CASCADE)] + ("raw",) + CASCADE
-
-
-def chain_parts(chain: str) -> list[str]:
-    """The attackers a chain of the ensemble names: "restorer>reader" -> both, "cascade:reader" -> the reader."""
-    return chain.removeprefix(CASCADE_PREFIX).split(">")

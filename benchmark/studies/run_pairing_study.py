@@ -28,8 +28,8 @@ from __future__ import annotations
 import argparse
 import json
 import os
-from pathlib import Path
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
