@@ -79,6 +79,9 @@ class PsfPretrainBudget:
     patience_evals: int
     min_gain_db: float
     cycle_steps: int = 0  # 0: one cosine over max_steps; else cosine cycles of this length (warm restarts)
+    sharp_share: float = 0.0  # share of near-sharp lenses among the draws (``LensFamily``) ...
+    sharp_from: int = 0  # ... of the refreshes from this step on
+    heldout_sharp: int = 0  # near-sharp lenses held out beside the ``heldout_lenses`` others
 
     def __post_init__(self) -> None:
         for name in ("width", "max_steps", "batch_size", "crop_px", "pool_lenses", "images_per_lens",
@@ -87,6 +90,9 @@ class PsfPretrainBudget:
                 raise ValueError(f"PsfPretrainBudget.{name} must be >= 1, got {getattr(self, name)!r}")
         if self.crop_px % 2:
             raise ValueError(f"PsfPretrainBudget.crop_px must be even (keeps the Bayer phase), got {self.crop_px}")
+        if not 0.0 <= self.sharp_share <= 1.0 or self.sharp_from < 0 or self.heldout_sharp < 0:
+            raise ValueError(f"PsfPretrainBudget: sharp_share must be in [0, 1] and sharp_from, heldout_sharp >= 0, "
+                             f"got {self.sharp_share!r}, {self.sharp_from!r}, {self.heldout_sharp!r}")
         if self.cycle_steps and (self.cycle_steps < 0 or self.max_steps % self.cycle_steps
                                  or self.cycle_steps % self.eval_every):
             raise ValueError(f"PsfPretrainBudget.cycle_steps={self.cycle_steps} must divide max_steps "
@@ -102,26 +108,37 @@ class PsfPretrainBudget:
         if self.cycle >= self.max_steps:
             return None
         steps = self.max_steps - self.cycle
-        return dataclasses.replace(self, max_steps=steps, cycle_steps=0 if steps == self.cycle else self.cycle)
+        earlier = dataclasses.replace(self, max_steps=steps, cycle_steps=0 if steps == self.cycle else self.cycle)
+        if steps <= self.sharp_from:  # the near-sharp lenses came in later
+            earlier = dataclasses.replace(earlier, sharp_share=0.0, sharp_from=0, heldout_sharp=0)
+        return earlier
+
+    def family(self) -> LensFamily:
+        """The lens family this budget draws from."""
+        return LensFamily(self.sharp_share)
 
     def to_dict(self) -> dict[str, Any]:
-        """The fields (``cycle_steps`` only when set: the keys of budgets made before it stay valid)."""
+        """The fields (``cycle_steps`` and the near-sharp ones only when set: the keys of budgets made before
+        them stay valid)."""
         d = dataclasses.asdict(self)
-        if not d["cycle_steps"]:
-            del d["cycle_steps"]
+        for name in ("cycle_steps", "sharp_share", "sharp_from", "heldout_sharp"):
+            if not d[name]:
+                del d[name]
         return d
 
 
 PSF_BUDGETS: dict[str, PsfPretrainBudget] = {
     # The shipped pre-training (quick and paper profiles share it: a convolutional network is
     # size-agnostic and the PSFs are in sensor pixels either way).
-    # Six cosine cycles of 2,500 steps, each shipped (``nafnet-known-psf-full-s0``, ``-full5000-s0``,
-    # ..., ``-full15000-s0``) and continued from by the next; the fifth gained 0.09 dB held-out over the
-    # fourth (28.18 -> 28.27 dB), the fourth 0.28 dB.
+    # Cosine cycles of 2,500 steps, each shipped (``nafnet-known-psf-full-s0``, ``-full5000-s0``, ...,
+    # ``-full17500-s0``) and continued from by the next; the fifth gained 0.09 dB held-out over the fourth
+    # (28.18 -> 28.27 dB), the sixth 0.09 dB. From the seventh on a quarter of the draws are near-sharp
+    # lenses, two of them held out: the sharp lenses had needed minutes of fine-tuning per lens.
     "full": PsfPretrainBudget(width=16, enc_blocks=(1, 1, 2), middle_blocks=2, dec_blocks=(1, 1, 1),
-                              max_steps=15000, batch_size=8, crop_px=128, pool_lenses=8, images_per_lens=6,
+                              max_steps=17500, batch_size=8, crop_px=128, pool_lenses=8, images_per_lens=6,
                               refresh_every=20, eval_every=250, heldout_lenses=6, patience_evals=4,
-                              min_gain_db=0.05, cycle_steps=2500),
+                              min_gain_db=0.05, cycle_steps=2500, sharp_share=0.25, sharp_from=15000,
+                              heldout_sharp=2),
     # Tiny and smoke runs: seconds, so that the tests exercise the whole path.
     "small": PsfPretrainBudget(width=8, enc_blocks=(1, 1), middle_blocks=1, dec_blocks=(1, 1),
                                max_steps=12, batch_size=2, crop_px=32, pool_lenses=2, images_per_lens=2,
@@ -204,6 +221,11 @@ class PretrainCurve:
     seconds: float = 0.0
     heldout: list[dict[str, Any]] = dataclasses.field(default_factory=list)  # the held-out lenses
     kept: int | None = None  # the step whose weights were kept, where that is not simply the best one
+    # With near-sharp held-out lenses: the mean over them and over the others, per evaluation.
+    sharp_psnr_db: list[float] = dataclasses.field(default_factory=list)
+    others_psnr_db: list[float] = dataclasses.field(default_factory=list)
+    # The curve before a warm start that changed the held-out set (its own steps, scores and lenses).
+    before: dict[str, Any] | None = None
 
     @property
     def kept_step(self) -> int:
@@ -250,11 +272,28 @@ def _train_step(model: NAFNet, optimizer: torch.optim.Optimizer, schedule: torch
 
 def _heldout_psnr(model: NAFNet, pairs: list[tuple[Tensor, Tensor]], device: str) -> float:
     """Mean PSNR (dB) over every image of the (input, target) batches; the model is back in train mode after."""
+    return float(torch.cat(_heldout_scores(model, pairs, device)).mean())
+
+
+def _heldout_scores(model: NAFNet, pairs: list[tuple[Tensor, Tensor]], device: str) -> list[Tensor]:
+    """PSNR (dB) of every image, one tensor per (input, target) batch; the model is back in train mode after."""
     model.eval()
     with torch.no_grad():
         scores = [_psnr(model(x.to(device)).cpu(), y) for x, y in pairs]
     model.train()
-    return float(torch.cat(scores).mean())
+    return scores
+
+
+def _record(curve: PretrainCurve, step: int, scores: list[Tensor], n_others: int) -> float:
+    """Appends an evaluation (per-lens image scores, the near-sharp lenses after the first ``n_others``) to
+    ``curve``; returns its score, the mean over every image."""
+    score = float(torch.cat(scores).mean())
+    curve.steps.append(step)
+    curve.heldout_psnr_db.append(score)
+    if len(scores) > n_others:
+        curve.others_psnr_db.append(float(torch.cat(scores[:n_others]).mean()))
+        curve.sharp_psnr_db.append(float(torch.cat(scores[n_others:]).mean()))
+    return score
 
 
 def _flattened(scores: list[float], patience: int, min_gain: float) -> tuple[bool, bool]:
@@ -279,7 +318,7 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
         device: Where the network trains (rendering stays on the CPU).
         checkpoint: A file to resume from and to write every evaluation to (``torch.save`` of tensors
             and plain values, read back with ``weights_only=True``); None keeps nothing.
-        family: The lens family (default ``LensFamily()``).
+        family: The lens family (default ``budget.family()``).
         progress: Called with one line per evaluation (besides the log).
         warm_start: The weights and curve of this budget's first cycles (``first_cycles``: the same seed,
             scenes and draws) to continue from at the restart, where no checkpoint exists. The optimiser's
@@ -291,11 +330,17 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
     With cosine cycles (``cycle_steps``) the stop rule is read at each cycle's end only: the fit stops
     "flattened" when that cycle's best held-out score is less than ``min_gain_db`` above the best before it
     (the restart's high learning rate makes the first evaluations of a cycle fall).
+
+    Near-sharp lenses (``budget.sharp_share``, ``sharp_from``, ``heldout_sharp``): the refreshes from step
+    ``sharp_from`` on may draw them, and ``heldout_sharp`` of them join the held-out set (its score is the
+    mean over all its lenses; the curve keeps the mean over each kind too). A warm start whose curve was
+    scored on another held-out set scores its start on this one: the curve goes on from there, and the
+    earlier one is kept whole in ``curve.before``.
     """
     if scenes.ndim != 4 or scenes.shape[0] < 1 or heldout_scenes.ndim != 4 or heldout_scenes.shape[0] < 1:
         raise ValueError(f"pretrain needs (N, 3, H, W) train and held-out scenes, got {tuple(scenes.shape)} "
                          f"and {tuple(heldout_scenes.shape)}")
-    family = family or LensFamily()
+    family = family or budget.family()
     model = build_network(budget, seed).to(device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=_LR, betas=_BETAS, weight_decay=_WEIGHT_DECAY)
     schedule: torch.optim.lr_scheduler.LRScheduler = (
@@ -324,17 +369,25 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
         curve, best_state, start = PretrainCurve.from_dict(saved["curve"]), saved["best"], int(saved["step"])
         log.info("nafnet-known-psf pre-training resumed at step %d from %s", start, checkpoint)
 
-    # Held-out set: fixed lenses of another seed stream, each on every held-out scene.
-    heldout_draws = [family.draw(stream_generator(seed, HELDOUT_SEED_OFFSET, i)) for i in range(budget.heldout_lenses)]
+    # Held-out set: fixed lenses of another seed stream, each on every held-out scene (near-sharp ones last).
+    n_lenses = budget.heldout_lenses + budget.heldout_sharp
+    heldout_draws = [family.draw(stream_generator(seed, HELDOUT_SEED_OFFSET, i), sharp=i >= budget.heldout_lenses)
+                     for i in range(n_lenses)]
     heldout = [(centre(_render(family, d, heldout_scenes, 10_000 * (i + 1))), centre(heldout_scenes))
                for i, d in enumerate(heldout_draws)]
-    curve.heldout = [d.describe() for d in heldout_draws]
+    described = [d.describe() for d in heldout_draws]
+    if curve.steps and curve.heldout and curve.heldout != described:  # a warm start onto another held-out set
+        curve = PretrainCurve(seconds=curve.seconds, before=curve.to_dict())
+        _record(curve, start, _heldout_scores(model, heldout, device), budget.heldout_lenses)
+        log.info("nafnet-known-psf pre-training: the held-out set changed at step %d; the start scores %.2f dB on "
+                 "the new one", start, curve.heldout_psnr_db[0])
+    curve.heldout = described
     curve.wiener_psnr_db = float(torch.cat([_psnr(x[:, :3], y) for x, y in heldout]).mean())
 
 
     def refresh(index: int) -> tuple[Tensor, Tensor]:
         g = stream_generator(seed, index, 0)
-        drawn = family.draw(g)
+        drawn = family.draw(g, sharp=False if index * budget.refresh_every < budget.sharp_from else None)
         chosen = torch.randperm(scenes.shape[0], generator=g)[:budget.images_per_lens]
         return _render(family, drawn, scenes[chosen], 1_000_000 + index * 1000), scenes[chosen]
 
@@ -354,9 +407,7 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
                            stream_generator(seed, step, 1), device)
         bar.set_postfix(psnr_db=f"{-loss:.2f}")
         if (step + 1) % budget.eval_every == 0 or step + 1 == budget.max_steps:
-            score = _heldout_psnr(model, heldout, device)
-            curve.steps.append(step + 1)
-            curve.heldout_psnr_db.append(score)
+            score = _record(curve, step + 1, _heldout_scores(model, heldout, device), budget.heldout_lenses)
             if score >= max(curve.heldout_psnr_db):
                 best_state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
             curve.seconds = time.perf_counter() - t0
@@ -367,8 +418,10 @@ def pretrain(budget: PsfPretrainBudget, scenes: Tensor, heldout_scenes: Tensor, 
             else:
                 flat, rising = _flattened(curve.heldout_psnr_db, budget.patience_evals, budget.min_gain_db)
             curve.still_rising = rising
-            line = (f"step {step + 1}/{budget.max_steps}: held-out {score:.2f} dB (Wiener {curve.wiener_psnr_db:.2f} dB), "
-                    f"{curve.seconds:.0f} s")
+            kinds = (f"; near-sharp {curve.sharp_psnr_db[-1]:.2f}, others {curve.others_psnr_db[-1]:.2f} dB"
+                     if budget.heldout_sharp else "")
+            line = (f"step {step + 1}/{budget.max_steps}: held-out {score:.2f} dB (Wiener {curve.wiener_psnr_db:.2f} dB"
+                    f"{kinds}), {curve.seconds:.0f} s")
             if checkpoint is not None:
                 checkpoint.parent.mkdir(parents=True, exist_ok=True)
                 tmp = checkpoint.with_suffix(".tmp")

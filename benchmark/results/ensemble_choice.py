@@ -188,8 +188,9 @@ class Outcomes:
         psnr: (n_scenes, len(restorers)) PSNR in dB (None without per-scene units).
         pass_s: Per chain, the seconds its row measured for its pass over its images (``n_images`` /
             ``images_per_s``; a reader chain's row holds its reader's pass; the cascade's ``cascade_s``).
-        fit_s: Per attacker, the seconds its fit took (``fit_s`` of its own row: the restorer's, or the
-            reader's on the sensor image); a chain pays it once for each attacker it is the first to use.
+        fit_s: Per attacker, the seconds its fit took (``fit_s`` of a restorer's row; of a reader's row on the
+            sensor image, or of the first chain read with a reader that has none); a chain pays it once for each
+            attacker it is the first to use.
     """
 
     lens: str
@@ -209,8 +210,8 @@ class Outcomes:
             m = r.metrics
             pass_s[r.attack] = float(m.get("cascade_s", 0.0)) + (
                 float(m["n_images"]) / float(m["images_per_s"]) if m.get("images_per_s") and "n_images" in m else 0.0)
-            if "fit_s" in m:
-                fit_s[r.attack] = float(m["fit_s"])
+            if "fit_s" in m:  # a chain row's is its reader's fit
+                fit_s[r.reader if r.restorer and r.reader else r.attack] = float(m["fit_s"])
         return cls(lens, seed_plates(mine, seed), scenes[0] if scenes else (),
                    None if scenes is None else scenes[1], pass_s, fit_s)
 

@@ -417,6 +417,7 @@ class ReadyReader:
     described: dict = field(default_factory=dict)
     notes: dict[str, str] = field(default_factory=dict)  # what its fit says of itself (`fit_notes`)
     fit_s: float | None = None  # the seconds its fit took here (a cache hit: the load)
+    fit_recorded: bool = False  # whether a row carries fit_s yet (the first row read with it does)
 
 
 def _flag(value: bool) -> str:
@@ -503,8 +504,10 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
     timing = dict(timing)
     if target.plates is not None:
         timing["n_frames"] = float(target.plates.n_frames)
-    if restorer is None and ready.fit_s is not None:  # the reader's own row carries its fit; its chains do not
-        timing["fit_s"] = ready.fit_s
+    # The first row read with the reader carries its fit: its own on the sensor image where the run has that
+    # row, else its first chain (a reader that reads only after restorers); the others do not.
+    if ready.fit_s is not None and not ready.fit_recorded:
+        timing["fit_s"], ready.fit_recorded = ready.fit_s, True
     # A chain needs what its strongest part needs (a known-PSF restorer's lens access, say).
     threat = reader.threat_model if restorer is None else attacks.ThreatModel.strongest(
         reader.threat_model, out.threat_models[restorer])

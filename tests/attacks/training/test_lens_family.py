@@ -74,3 +74,31 @@ def test_a_mask_draw_builds_the_lens_with_its_coefficients(family):
     with torch.no_grad():
         reference.coefficients_um.copy_(torch.tensor(drawn.zernike_um))
     assert torch.allclose(lens.psf(), reference.psf())
+
+
+def test_near_sharp_draws_keep_the_other_draws_and_stay_near_the_centre(family):
+    """A family with near-sharp lenses draws the others exactly as the plain family does (the share is
+    decided by a number drawn after theirs); its near-sharp draws keep the tilts whole and the aberrations
+    within SHARP_FRACTION of their bounds, at the stated share."""
+    from attacks.training.lens_family import SHARP_FRACTION, TILT_TERMS
+
+    with pytest.raises(ValueError, match="sharp_share"):
+        LensFamily(1.5)
+    sharp_family = LensFamily(0.25)
+    plain = _draws(family, 50, 5)
+    g = torch.Generator().manual_seed(5)
+    assert [sharp_family.draw(g, sharp=False) for _ in range(50)] == plain
+    assert "sharp_share" not in family.describe() and sharp_family.describe()["sharp_share"] == 0.25
+    forced = [sharp_family.draw(torch.Generator().manual_seed(i), sharp=True) for i in range(300)]
+    for d in forced:
+        assert d.kind == "mask" and d.focus_distance_m == family.defocus_spec.optics.object_distance_m
+        for i, (c, (lo, hi)) in enumerate(zip(d.zernike_um, family.bounds_um)):
+            scale = 1.0 if i < TILT_TERMS else SHARP_FRACTION
+            assert scale * lo <= c <= scale * hi
+    largest = max(abs(c) for d in forced for c in d.zernike_um[TILT_TERMS:])
+    assert largest > 0.9 * SHARP_FRACTION * 1.0  # uniform over the whole shrunken box, not a point
+    draws = _draws(sharp_family, 2000, 6)
+    near = sum(d.kind == "mask" and max(abs(c) for c in d.zernike_um[TILT_TERMS:]) <= SHARP_FRACTION for d in draws)
+    # Near-sharp draws, plus the rare plain masks that fall inside the shrunken box (at most 0.4 * 0.2 per
+    # term, all three: < 0.1 %), within 4.5 binomial standard errors.
+    assert abs(near / len(draws) - 0.25 * 1.0) < 4.5 * math.sqrt(0.25 * 0.75 / len(draws)) + 0.002

@@ -142,3 +142,28 @@ def test_a_fine_tune_keeps_its_start_unless_a_step_beats_it_by_the_stop_rules_ga
     assert curve_b.kept_step == 0 and curve_b.to_fit_curve().kept_step == 0
     assert all(torch.equal(kept.state_dict()[k], v) for k, v in build_network(SMALL, 0).state_dict().items())
     assert any(not torch.equal(tuned.state_dict()[k], v) for k, v in kept.state_dict().items())
+
+
+def test_a_warm_start_onto_near_sharp_lenses_scores_its_start_on_the_new_held_out_set(scenes):
+    """The cycle that brings in near-sharp lenses: the earlier cycles' budget has none (its key is the one
+    shipped before), the held-out set gains near-sharp lenses, so the start is scored again on it and the
+    earlier curve is kept whole in ``before``; each evaluation keeps the mean over either kind of lens."""
+    train, heldout = scenes
+    two = dataclasses.replace(SMALL, max_steps=8, cycle_steps=4, patience_evals=99, sharp_share=0.5, sharp_from=4,
+                              heldout_sharp=1)
+    first_budget = two.first_cycles()
+    assert first_budget is not None and first_budget.to_dict() == dataclasses.replace(SMALL, max_steps=4, patience_evals=99).to_dict()
+    assert two.to_dict()["heldout_sharp"] == 1 and two.family().sharp_share == 0.5
+    first, first_curve = pretrain(first_budget, train, heldout, 0)
+    start_again = pretrain(dataclasses.replace(first_budget, max_steps=8, cycle_steps=4, patience_evals=99),
+                           train, heldout, 0, warm_start=(_state(first), first_curve))[1]
+    net, curve = pretrain(two, train, heldout, 0, warm_start=(_state(first), first_curve))
+    assert curve.before is not None and curve.before["heldout_psnr_db"] == first_curve.heldout_psnr_db
+    assert curve.steps == [4, 8] and len(curve.heldout) == SMALL.heldout_lenses + 1
+    assert curve.heldout[:SMALL.heldout_lenses] == first_curve.heldout
+    # The start on the lenses both sets share scores as before; the mean over all is the lens-weighted mean.
+    assert curve.others_psnr_db[0] == pytest.approx(first_curve.heldout_psnr_db[-1], abs=1e-5)
+    n = SMALL.heldout_lenses
+    for total, others, sharp in zip(curve.heldout_psnr_db, curve.others_psnr_db, curve.sharp_psnr_db):
+        assert total == pytest.approx((n * others + sharp) / (n + 1), abs=1e-5)
+    assert start_again.before is None  # the same held-out set: the curve simply goes on

@@ -43,7 +43,7 @@ class Blind(attacks.Reader):
         return [[] for _ in range(images.shape[0])]
 
 
-def _evaluate(chains):
+def _evaluate(chains, fit_s=None, rows_out=None):
     cfg = RunConfig(["fake"], None, "synthetic", get_profile("smoke"), [0], chains=chains)
     scenes = load_scenes("synthetic", "val", 3, (64, 128), 0)
     sensor = to_tensor(scenes)
@@ -53,10 +53,12 @@ def _evaluate(chains):
     read, unread = Counting("read"), Counting("unread")
     out = Attacked()
     builder = RowBuilder(cfg, "fake", 0, {"lens": "fake"}, {"device": "cpu"})
-    ready = [ReadyReader(Blind(), None, {"name": "blind"})]
+    ready = [ReadyReader(Blind(), None, {"name": "blind"}, fit_s=fit_s)]
     read_sensor(target, ready, cfg, builder, out)
     run_restorers(target, [read, unread], {}, cfg, builder, out, ready)
     out.finish()
+    if rows_out is not None:
+        rows_out.extend(out.rows)
     return [r.attack for r in out.rows], read, unread, sensor.shape
 
 
@@ -69,6 +71,17 @@ def test_only_the_chains_of_the_ensemble_are_read_and_their_restorers_windows_re
     assert [s for s in read.shapes if s[-2:] != frames[-2:]]
     everything, *_ = _evaluate(None)  # the full cross product
     assert sorted(everything) == sorted(["read", "unread", "blind", "read>blind", "unread>blind"])
+
+
+@pytest.mark.slow
+def test_a_readers_fit_is_carried_once_by_its_first_row_its_own_or_else_its_first_chain():
+    """A reader whose row on the sensor image the run does not measure (it reads only after restorers) still
+    has its fit seconds in the results: on the first chain read with it, and on no other row."""
+    for chains, carrier in ((("read", "unread", "blind", "read>blind", "unread>blind"), "blind"),
+                            (("read", "unread", "read>blind", "unread>blind"), "read>blind")):
+        rows: list = []
+        _evaluate(chains, fit_s=7.0, rows_out=rows)
+        assert [r.attack for r in rows if "fit_s" in r.metrics and r.reader == "blind"] == [carrier], chains
 
 
 def test_the_standard_ensemble_is_the_rule_re_applied_to_fresh_runs_of_the_privacy_lenses():
