@@ -31,15 +31,15 @@ class FitCode:
 
 FIT_CODE: dict[str, FitCode] = {
     "learned-reader": FitCode("attacks.readers.learned_reader", 1,
-                              "12c70efbf0280b1fc65f39968066955cbfedc2cdeb09d4ff51604b11b59eaf25"),
+                              "9d3dc39a163bfed6369c329ac14e05be72b66c42c1792ce401c392e7fe81b5c9"),
     "learned-reader-psf": FitCode("attacks.readers.learned_reader_psf", 1,
-                                  "648ad2c61de5fd7f303fe3eb3aeea6efa85b00042b21ebaef9bf176ad82d0624"),
+                                  "f60c0e0a4179de9592380cf913bfe2a99470417f3118c71ec3f1531ad627575c"),
     "nafnet-known-pairs-tuned": FitCode("attacks.restorers.nafnet_known_pairs", 2,
-                                        "f5f3744d7e37dedf6d4d1656f0da7e2724498a707d0f1d724563b7eae8e469a5"),
+                                        "16831880bf81ceb05ffe7daee5057cc911e561a3aeaef10c3f36f84fa964eeda"),
     "nafnet-known-psf-tuned": FitCode("attacks.restorers.nafnet_known_pairs", 2,
-                                      "f5f3744d7e37dedf6d4d1656f0da7e2724498a707d0f1d724563b7eae8e469a5"),
+                                      "16831880bf81ceb05ffe7daee5057cc911e561a3aeaef10c3f36f84fa964eeda"),
     "nafnet-known-psf": FitCode("attacks.restorers.nafnet_known_psf", 1,
-                                "51b96cadde29c6635609aad1f60c312369f94aafe09b68eabb48c9410d7d199e"),
+                                "4612224ef4fd70a778ba717174a3fb2995b2e5198320d3bbbf6150e6df55580b"),
 }
 
 

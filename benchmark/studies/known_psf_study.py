@@ -8,6 +8,9 @@ entry at seed 0 (its ``lens_spec``), senses the entry's own val scenes exactly a
 pairs, ``nafnet-known-pairs-tuned`` (fed the PSF it measures from the pairs) and ``nafnet-known-psf-tuned``
 (fed the lens's own PSF). Each is compared per scene with every restorer of the entry and with the
 entry's best-per-scene ensemble PSNR (paired bootstrap, ``benchmark.results.stats``), and timed.
+Where the lens's full cross product at seed 0 is kept (``leaderboard/studies/cross_product``: the same
+val scenes and sensor noise, restored by the attackers of the day it ran), each is also paired per scene
+with that run's restorers (``versus_cross_product``): the weights shipped now against those it ran with.
 Writes ``leaderboard/studies/known_psf_restorers.json``.
 """
 
@@ -40,6 +43,7 @@ __all__ = ["main", "measure_lens"]
 
 ROOT = Path(__file__).resolve().parents[2]
 ENTRIES = ROOT / "leaderboard" / "entries"
+CROSS_PRODUCT = ROOT / "leaderboard" / "studies" / "cross_product"
 OUT = ROOT / "leaderboard" / "studies" / "known_psf_restorers.json"
 LENSES = ("ideal", "defocus", "gp", "os", "os-d-1000")
 TUNED = ("nafnet-known-pairs-tuned", "nafnet-known-psf-tuned")
@@ -50,6 +54,18 @@ def _entry_units(entry: dict[str, Any], seed: int) -> dict[str, list[float]]:
     return {r["attack"]: r["units"]["values"]["psnr_db"] for r in entry["rows"]
             if r["kind"] == "restorer" and r["seed"] == seed and r["status"] == "ok" and r.get("units")
             and "psnr_db" in r["units"]["values"]}
+
+
+def _cross_product_units(name: str, seed: int) -> dict[str, list[float]]:
+    """Per-scene PSNR of every restorer row of the lens's kept cross-product run at ``seed`` ({} if none)."""
+    from benchmark.studies.run_pairing_study import read_results
+
+    path = CROSS_PRODUCT / f"{name}.json.gz"
+    if not path.is_file():
+        return {}
+    return {r.attack: [float(v) for v in r.units.values["psnr_db"]] for r in read_results(path).rows
+            if r.kind == "restorer" and r.lens == name and r.seed == seed and r.ok and r.units is not None
+            and "psnr_db" in r.units.values}
 
 
 def _compare(a: list[float], b: list[float]) -> dict[str, Any]:
@@ -77,6 +93,7 @@ def measure_lens(name: str, tuned: bool, seed: int = 0) -> dict[str, Any]:
     sharp = to_tensor(scenes)
     sensor = sense(lens, sharp, profile.batch_size, seed, "cpu")
     published = _entry_units(entry, seed)
+    crossed = _cross_product_units(name, seed)
     cfg = RunConfig(lenses=[name], attacks=[], scenes="synthetic", profile=profile, seeds=[seed])
     ctx = FitContext(lens=lens, train_pairs=train_pairs_factory(lens, cfg, seed), seed=seed,
                      budget=profile.attack_budget())
@@ -98,6 +115,9 @@ def measure_lens(name: str, tuned: bool, seed: int = 0) -> dict[str, Any]:
                                   "per_scene_psnr_db": [round(v, 4) for v in values],
                                   "versus_published": {k: _compare(values, v) for k, v in published.items()
                                                        if len(v) == len(values)}}
+        if crossed:
+            record["versus_cross_product"] = {k: _compare(values, v) for k, v in crossed.items()
+                                              if len(v) == len(values)}
         if report.curve is not None:
             record["fit_curve"] = {"steps": list(report.curve.steps), "scores": list(report.curve.scores),
                                    "stopped": report.curve.stopped, "kept_step": report.curve.kept_step,
@@ -115,7 +135,11 @@ def measure_lens(name: str, tuned: bool, seed: int = 0) -> dict[str, Any]:
     return {"lens": name, "seed": seed, "n_scenes": len(scenes), "published_mean_psnr_db":
             {k: float(np.mean(v)) for k, v in published.items()},
             "published_ensemble_psnr_db": float(np.mean(best)) if published else None,
-            "wiener_pairing_max_abs_db": pairing, "restorers": ours}
+            "wiener_pairing_max_abs_db": pairing,
+            "cross_product_wiener_pairing_max_abs_db": (
+                float(np.max(np.abs(np.array(recomputed) - np.array(crossed["wiener-known-psf"]))))
+                if "wiener-known-psf" in crossed else None),
+            "restorers": ours}
 
 
 def main(argv: list[str] | None = None) -> int:
