@@ -31,15 +31,15 @@ class FitCode:
 
 FIT_CODE: dict[str, FitCode] = {
     "learned-reader": FitCode("attacks.readers.learned_reader", 1,
-                              "9d3dc39a163bfed6369c329ac14e05be72b66c42c1792ce401c392e7fe81b5c9"),
+                              "26087be883fea136a479eae521c84dfc4e0c3165cb58eb38c510c1fc8b7b5631"),
     "learned-reader-psf": FitCode("attacks.readers.learned_reader_psf", 1,
-                                  "f60c0e0a4179de9592380cf913bfe2a99470417f3118c71ec3f1531ad627575c"),
+                                  "c7b71f05e5b1d453adfd4e5432e12cf74b3b24b14ef23d1cd01993920f834a3b"),
     "nafnet-known-pairs-tuned": FitCode("attacks.restorers.nafnet_known_pairs", 2,
-                                        "16831880bf81ceb05ffe7daee5057cc911e561a3aeaef10c3f36f84fa964eeda"),
+                                        "a35f9ca3a9f5bf4c9a9a9c35e4988b9d37accbf9fa394b655f8af768ea93da24"),
     "nafnet-known-psf-tuned": FitCode("attacks.restorers.nafnet_known_pairs", 2,
-                                      "16831880bf81ceb05ffe7daee5057cc911e561a3aeaef10c3f36f84fa964eeda"),
+                                      "a35f9ca3a9f5bf4c9a9a9c35e4988b9d37accbf9fa394b655f8af768ea93da24"),
     "nafnet-known-psf": FitCode("attacks.restorers.nafnet_known_psf", 1,
-                                "4612224ef4fd70a778ba717174a3fb2995b2e5198320d3bbbf6150e6df55580b"),
+                                "462d7f5fd9e1b970159daf0ef35aff8a93f4a3f27398dec90bfe6c836c75d20e"),
 }
 
 
