@@ -56,6 +56,10 @@ class RunConfig:
         """Whether the run measures `chain` (always, in the full cross product)."""
         return self.chains is None or chain in self.chains
 
+    def reads_with(self, reader: str) -> bool:
+        """Whether any chain of the run reads with `reader` (on the sensor image or after a restorer)."""
+        return self.chains is None or any(c.split(">")[-1] == reader for c in self.chains)
+
 
 def training_scenes(scene_set: str) -> str:
     """Scenes that carry labels for training: Cityscapes when given, else the synthetic set."""

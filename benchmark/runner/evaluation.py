@@ -468,14 +468,17 @@ def fit_readers(target: Target, readers: Sequence[attacks.Reader], cfg: RunConfi
 
 def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
                images: torch.Tensor | Sequence[torch.Tensor], cfg: RunConfig, rows: RowBuilder, out: Attacked,
-               known: ReadResult | None = None) -> ReadResult | None:
+               known: ReadResult | None = None, as_reference: bool = False) -> ReadResult | None:
     """Read `images` (the sensor's when `restorer` is None, else that restorer's output; plate
     windows when the target has them) with one fitted reader and score the chain. `known`: that read
     already made, of the same images (a twin restorer's, ``Restored``); it is scored instead of reading.
+    `as_reference`: a target nothing restores (the sharp scenes), which every reader of the run reads as it
+    is, whether the run reads with it on the sensor image or only after restorers.
     Returns the read (None where the chain was not read)."""
     reader = ready.reader
     chain = reader.name if restorer is None else chain_name(restorer, reader.name)
-    if not cfg.wants(chain):  # not a chain of the run's ensemble (cfg.chains)
+    wanted = cfg.reads_with(reader.name) if as_reference and restorer is None else cfg.wants(chain)
+    if not wanted:  # not a chain of the run's ensemble (cfg.chains)
         return None
     kind = "reader" if restorer is None else "reference" if restorer in out.references else "chain"
     settings = {"reader": ready.described, **({"restorer": out.described[restorer]} if restorer else {})}
@@ -546,9 +549,13 @@ def read_sensor(target: Target, readers: Sequence[ReadyReader], cfg: RunConfig, 
 
 def run_reader(target: Target, reader: attacks.Reader, cfg: RunConfig, rows: RowBuilder, out: Attacked) -> None:
     """Fit `reader`, read the sensor images and every restored set already in `out`, score each
-    chain; its rows go to `out.rows` (for a target without restorers, e.g. the sharp scenes)."""
+    chain; its rows go to `out.rows` (for a target without restorers, e.g. the sharp scenes, which it reads
+    whenever the run reads with it at all: `read_chain`'s `as_reference`)."""
+    if not cfg.reads_with(reader.name):
+        return
     for ready in fit_readers(target, [reader], cfg):
-        read_sensor(target, [ready], cfg, rows, out)
+        read_chain(target, ready, None, target.sensor if target.plates is None else target.plates.sensor,
+                   cfg, rows, out, as_reference=True)
         for name, images in (out.restored if target.plates is None else {}).items():
             read_chain(target, ready, name, images, cfg, rows, out)
     out.finish()

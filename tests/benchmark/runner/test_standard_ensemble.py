@@ -13,7 +13,8 @@ from benchmark.runner.defaults import (
     CASCADE, LEARNED_READER, MEASURED_ADDITIONS, MEASURED_READERS, RUN_PROPOSAL, STANDARD_ENSEMBLE, chain_parts)
 from benchmark.runner import runner
 from benchmark.runner.config import RunConfig
-from benchmark.runner.evaluation import Attacked, PlateSet, ReadyReader, Target, read_sensor, run_restorers
+from benchmark.runner.evaluation import (
+    Attacked, PlateSet, ReadyReader, Target, read_sensor, run_reader, run_restorers)
 from benchmark.runner.planning import run_directory
 from benchmark.results.schema import cascade_name
 from benchmark.runner.rows import RowBuilder
@@ -82,6 +83,23 @@ def test_a_readers_fit_is_carried_once_by_its_first_row_its_own_or_else_its_firs
         rows: list = []
         _evaluate(chains, fit_s=7.0, rows_out=rows)
         assert [r.attack for r in rows if "fit_s" in r.metrics and r.reader == "blind"] == [carrier], chains
+
+
+@pytest.mark.slow
+def test_the_sharp_scenes_are_read_by_every_reader_the_run_reads_with():
+    """The sharp reference (no lens, nothing restores it) is read by a reader the ensemble runs only after
+    restorers, as it is; a reader no chain of the run reads with is neither fitted nor read."""
+    scenes = load_scenes("synthetic", "val", 2, (64, 128), 0)
+    sharp = to_tensor(scenes)
+    windows = [sharp[0, :, :32, :48].clone(), sharp[1, :, 8:40, 16:80].clone()]
+    target = Target("sharp", scenes, sharp, sharp, attacks.FitContext(), None, None,
+                    plates=PlateSet(scenes=scenes, sharp=windows, sensor=windows, n_frames=2))
+    for chains, expected in ((("read", "read>blind"), ["blind"]), (("read", "read>other"), [])):
+        cfg = RunConfig(["sharp"], None, "synthetic", get_profile("smoke"), [0], chains=chains)
+        out = Attacked()
+        run_reader(target, Blind(), cfg, RowBuilder(cfg, "sharp", 0, {"lens": "sharp"}, {"device": "cpu"}), out)
+        assert [r.attack for r in out.rows] == expected, chains
+        assert all(r.kind == "reader" and r.ok for r in out.rows)
 
 
 def test_the_standard_ensemble_is_the_rule_re_applied_to_fresh_runs_of_the_privacy_lenses():
