@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from benchmark.results.schema import chain_parts
 from benchmark.store.cache import cache_root
 from benchmark.store.profiles import Profile
 from benchmark.scenes import PLATE_FORMAT
@@ -57,8 +58,9 @@ class RunConfig:
         return self.chains is None or chain in self.chains
 
     def reads_with(self, reader: str) -> bool:
-        """Whether any chain of the run reads with `reader` (on the sensor image or after a restorer)."""
-        return self.chains is None or any(c.split(">")[-1] == reader for c in self.chains)
+        """Whether any chain of the run reads with `reader` (on the sensor image, after a restorer or in a
+        cascade)."""
+        return self.chains is None or any(chain_parts(c)[-1] == reader for c in self.chains)
 
 
 def training_scenes(scene_set: str) -> str:

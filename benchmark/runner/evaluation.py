@@ -477,8 +477,7 @@ def read_chain(target: Target, ready: ReadyReader, restorer: str | None,
     Returns the read (None where the chain was not read)."""
     reader = ready.reader
     chain = reader.name if restorer is None else chain_name(restorer, reader.name)
-    wanted = cfg.reads_with(reader.name) if as_reference and restorer is None else cfg.wants(chain)
-    if not wanted:  # not a chain of the run's ensemble (cfg.chains)
+    if not (cfg.reads_with(reader.name) if as_reference else cfg.wants(chain)):  # not a chain of the run's ensemble (cfg.chains)
         return None
     kind = "reader" if restorer is None else "reference" if restorer in out.references else "chain"
     settings = {"reader": ready.described, **({"restorer": out.described[restorer]} if restorer else {})}
@@ -539,12 +538,13 @@ def plate_records(target: Target, row: Row, outcomes: list[PlateOutcome]) -> lis
     return [{"lens": target.lens_name, "attack": row.attack, "seed": row.seed, **o.__dict__} for o in outcomes]
 
 
-def read_sensor(target: Target, readers: Sequence[ReadyReader], cfg: RunConfig, rows: RowBuilder, out: Attacked
-                ) -> None:
-    """Each reader on the sensor images (the plate windows when the target has them)."""
+def read_sensor(target: Target, readers: Sequence[ReadyReader], cfg: RunConfig, rows: RowBuilder, out: Attacked,
+                as_reference: bool = False) -> None:
+    """Each reader on the sensor images (the plate windows when the target has them); `as_reference` as
+    `read_chain` takes it."""
     for ready in readers:
         read_chain(target, ready, None, target.sensor if target.plates is None else target.plates.sensor,
-                   cfg, rows, out)
+                   cfg, rows, out, as_reference=as_reference)
 
 
 def run_reader(target: Target, reader: attacks.Reader, cfg: RunConfig, rows: RowBuilder, out: Attacked) -> None:
@@ -554,8 +554,7 @@ def run_reader(target: Target, reader: attacks.Reader, cfg: RunConfig, rows: Row
     if not cfg.reads_with(reader.name):
         return
     for ready in fit_readers(target, [reader], cfg):
-        read_chain(target, ready, None, target.sensor if target.plates is None else target.plates.sensor,
-                   cfg, rows, out, as_reference=True)
+        read_sensor(target, [ready], cfg, rows, out, as_reference=True)
         for name, images in (out.restored if target.plates is None else {}).items():
             read_chain(target, ready, name, images, cfg, rows, out)
     out.finish()

@@ -31,6 +31,7 @@ import attacks
 from attacks.base import FitContext
 from benchmark.results import stats
 from benchmark.results.metrics import psnr
+from benchmark.results.schema import read_results
 from benchmark.runner.sensing import sense, to_tensor, train_pairs_factory
 from benchmark.runner.config import RunConfig
 from benchmark.scenes.loading import load_scenes
@@ -58,8 +59,6 @@ def _entry_units(entry: dict[str, Any], seed: int) -> dict[str, list[float]]:
 
 def _cross_product_units(name: str, seed: int) -> dict[str, list[float]]:
     """Per-scene PSNR of every restorer row of the lens's kept cross-product run at ``seed`` ({} if none)."""
-    from benchmark.studies.run_pairing_study import read_results
-
     path = CROSS_PRODUCT / f"{name}.json.gz"
     if not path.is_file():
         return {}
