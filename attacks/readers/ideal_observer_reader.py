@@ -25,9 +25,10 @@ search (its sweeps take other paths: on a clean test plate beam 6 stopped at a s
 than the true one, which beams 3, 4 and 8 found); the strings are scored once and shared, so the widths
 together find a string at least as likely as each width alone. Whether the plate has the EU band is
 decided first, by the best likelihood of the starting strings with and without it. Cost: about
-3 x beam x 134 renderings per sweep and width. The boxes of one ``read`` call are searched in `workers`
-forked processes (one torch thread each; default: the CPUs this process may use): the rendering holds
-the GIL, so threads do not help; a box's read does not depend on which process searched it. The default
+3 x beam x 134 renderings per sweep and width. The boxes of one ``read_batches`` call (every batch
+of it: a run hands the cascade's windows in one call) are searched in `workers` forked processes (one torch
+thread each; default: the CPUs this process may use), the widest first: the rendering holds the GIL, so
+threads do not help; a box's read does not depend on which process searched it, nor when. The default
 search (beams 3 then 6, at most 6 sweeps) against beam 3 with 4 sweeps on the same plates, and what each
 costs: leaderboard/studies/ideal_observer_beam.json (benchmark.studies.observer_beam_study).
 """
@@ -37,6 +38,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import sys
+from collections.abc import Iterable
 from typing import Any, ClassVar
 
 import numpy as np
@@ -51,9 +53,9 @@ from lenses.sensor import bayer_masks
 __all__ = ["IdealObserverReader"]
 
 REFERENCE_BACKGROUND = (236, 236, 228)  # rendering colour; the per-channel gain absorbs the true tint
-# What the forked workers of one read call search in: (the reader, the raw electron images); set only
-# while that call's pool runs (the children inherit it by fork).
-_FORKED: tuple[IdealObserverReader, Tensor] | None = None
+# What the forked workers of one read call search in: (the reader, the raw electron images of each batch);
+# set only while that call's pool runs (the children inherit it by fork).
+_FORKED: tuple[IdealObserverReader, list[Tensor]] | None = None
 
 
 class IdealObserverReader(Reader):
@@ -119,26 +121,43 @@ class IdealObserverReader(Reader):
 
     def read(self, images: Tensor, hints: ReadHints | None = None) -> list[list[PlateRead]]:
         """Read every box of ``hints.plate_boxes``; see ``Reader.read``."""
+        return self.read_batches([(images, hints)])[0]
+
+    def read_batches(self, batches: Iterable[tuple[Tensor, ReadHints | None]]) -> list[list[list[PlateRead]]]:
+        """``read`` of each batch, the boxes of every batch searched in one pool of workers (the widest
+        first), so that no worker idles between batches (a batch of one window would leave all but one
+        waiting); a box's read does not depend on where or when it was searched."""
         if self._camera is None:
             raise RuntimeError("ideal-observer must be fitted (fit(ctx) with ctx.lens) before reading")
+        raws: list[Tensor] = []
+        jobs: list[tuple[int, int, tuple[int, int, int, int]]] = []  # (batch, image, box)
+        outs: list[list[list[PlateRead]]] = []
+        for b, (images, hints) in enumerate(batches):
+            raw, boxes = self._boxes(images, hints)
+            raws.append(raw)
+            jobs += [(b, i, box) for i, box in boxes]
+            outs.append([[] for _ in range(images.shape[0])])
+        for (b, i, box), (text, score) in zip(jobs, self._search_boxes(raws, jobs)):
+            outs[b][i].append(PlateRead(text, tuple(float(v) for v in box), score))  # type: ignore[arg-type]
+        return outs
+
+    def _boxes(self, images: Tensor, hints: ReadHints | None) -> tuple[Tensor, list[tuple[int, tuple[int, int, int, int]]]]:
+        """One batch's raw electron images (B, H, W) and its boxes to search: (image, box), in order."""
         if images.ndim != 4 or images.shape[1] != 3:
             raise ValueError(f"images must be (B, 3, H, W), got shape {tuple(images.shape)}")
         boxes = None if hints is None else hints.plate_boxes
         if boxes is None or len(boxes) != images.shape[0]:
             raise ValueError("ideal-observer needs ReadHints(plate_boxes=...) with one list of true plate boxes "
                              f"per image ({images.shape[0]} images); got {None if boxes is None else len(boxes)}")
-        cam = self._camera
-        raw = self._raw_electrons(images.detach().to(torch.float64).cpu(), cam)
-        jobs = []  # (image, box)
+        assert self._camera is not None
+        raw = self._raw_electrons(images.detach().to(torch.float64).cpu(), self._camera)
+        jobs = []
         for i, image_boxes in enumerate(boxes):
             for box in image_boxes:
                 x0, y0, x1, y1 = (int(round(v)) for v in box)
                 if x1 - x0 >= self.min_width_px and y1 - y0 >= 2:
                     jobs.append((i, (x0, y0, x1, y1)))
-        out: list[list[PlateRead]] = [[] for _ in range(images.shape[0])]
-        for (i, box), (text, score) in zip(jobs, self._search_boxes(raw, jobs)):
-            out[i].append(PlateRead(text, tuple(float(v) for v in box), score))  # type: ignore[arg-type]
-        return out
+        return raw, jobs
 
     def _worker_count(self, n_jobs: int) -> int:
         """Processes for `n_jobs` boxes: `workers` (None: the CPUs this process may use), at most one a box,
@@ -148,24 +167,31 @@ class IdealObserverReader(Reader):
         wanted = self.workers if self.workers is not None else len(os.sched_getaffinity(0))
         return max(1, min(wanted, n_jobs))
 
-    def _search_boxes(self, raw: Tensor, jobs: list[tuple[int, tuple[int, int, int, int]]]) -> list[tuple[str, float]]:
-        """``read_box`` of every job, in this process or in forked workers (one torch thread each), in order;
-        the pool is closed and its processes reaped before this returns."""
+    def _search_boxes(self, raws: list[Tensor], jobs: list[tuple[int, int, tuple[int, int, int, int]]]
+                      ) -> list[tuple[str, float]]:
+        """``read_box`` of every job (batch, image, box) of the raw electron batches `raws`, in this process or
+        in forked workers (one torch thread each; the widest boxes handed out first, so that the last to
+        finish is a short one), in the jobs' order; the pool is closed and its processes reaped before this
+        returns."""
         n = self._worker_count(len(jobs))
         if n <= 1:
-            return [self.read_box(raw[i], box) for i, box in jobs]
+            return [self.read_box(raws[b][i], box) for b, i, box in jobs]
+        order = sorted(range(len(jobs)), key=lambda j: (-(jobs[j][2][2] - jobs[j][2][0]), j))
         global _FORKED
-        _FORKED = (self, raw)
+        _FORKED = (self, raws)
         try:
             pool = multiprocessing.get_context("fork").Pool(n, initializer=torch.set_num_threads, initargs=(1,))
             try:
-                found = pool.map(_read_forked, jobs, chunksize=1)
+                found = pool.map(_read_forked, [jobs[j] for j in order], chunksize=1)
             finally:
                 pool.close()
                 pool.join()
         finally:
             _FORKED = None
-        return found
+        out: list[tuple[str, float]] = [("", 0.0)] * len(jobs)
+        for j, result in zip(order, found):
+            out[j] = result
+        return out
 
     @staticmethod
     def _raw_electrons(images: Tensor, cam: dict[str, Any]) -> Tensor:
@@ -212,12 +238,12 @@ class IdealObserverReader(Reader):
                 break
 
 
-def _read_forked(job: tuple[int, tuple[int, int, int, int]]) -> tuple[str, float]:
+def _read_forked(job: tuple[int, int, tuple[int, int, int, int]]) -> tuple[str, float]:
     """One box's read in a forked worker of ``IdealObserverReader._search_boxes``."""
     assert _FORKED is not None, "a worker of _search_boxes reads only inside its pool"
-    reader, raw = _FORKED
-    i, box = job
-    return reader.read_box(raw[i], box)
+    reader, raws = _FORKED
+    b, i, box = job
+    return reader.read_box(raws[b][i], box)
 
 
 def _starting_strings(alphabets: list[str]) -> list[str]:

@@ -31,9 +31,9 @@ class FitCode:
 
 FIT_CODE: dict[str, FitCode] = {
     "learned-reader": FitCode("attacks.readers.learned_reader", 1,
-                              "26087be883fea136a479eae521c84dfc4e0c3165cb58eb38c510c1fc8b7b5631"),
+                              "433d7814ac2122e6d34f76d41ec2cac867701178193074ca0a5ddedd62844886"),
     "learned-reader-psf": FitCode("attacks.readers.learned_reader_psf", 1,
-                                  "c7b71f05e5b1d453adfd4e5432e12cf74b3b24b14ef23d1cd01993920f834a3b"),
+                                  "23975e9381ce17274e7df9caf0d0fe5f39db7ada614ba17b9ac0ee8df302e494"),
     "nafnet-known-pairs-tuned": FitCode("attacks.restorers.nafnet_known_pairs", 2,
                                         "a35f9ca3a9f5bf4c9a9a9c35e4988b9d37accbf9fa394b655f8af768ea93da24"),
     "nafnet-known-psf-tuned": FitCode("attacks.restorers.nafnet_known_pairs", 2,

@@ -128,7 +128,8 @@ def _patch(rng: np.random.Generator, hw: tuple[int, int]) -> np.ndarray:
     gradient, a few bars and blobs of other colours (bumpers, lights, shadows) and fine texture."""
     h, w = hw
     base = rng.uniform(0.05, 0.9, size=3).astype(np.float32)
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    # The shading as a column plus a row, broadcast: the values of the full (H, W) grids, at a fraction of the work.
+    yy, xx = np.arange(h, dtype=np.float32)[:, None], np.arange(w, dtype=np.float32)[None, :]
     gradient = 1.0 + rng.uniform(-0.25, 0.25) * (yy / max(h, 1) - 0.5) + rng.uniform(-0.15, 0.15) * (xx / max(w, 1) - 0.5)
     patch = base[None, None, :] * gradient[..., None]
     for _ in range(int(rng.integers(0, 5))):

@@ -84,5 +84,10 @@ def test_reads_in_forked_workers_equal_the_reads_in_this_process_and_leave_no_pr
         reads[workers] = reader.read(images, hints)
         assert child_pids() <= before  # the pool's processes are reaped before read returns
     assert reads[1] == reads[2] and [len(r) for r in reads[1]] == [2, 1]
+    # Two batches in one read_batches call share one pool (the widest box first): the same reads, per batch.
+    batches = [(images[:1], ReadHints(plate_boxes=hints.plate_boxes[:1])),
+               (images[1:], ReadHints(plate_boxes=hints.plate_boxes[1:]))]
+    assert reader.read_batches(iter(batches)) == [reads[1][:1], reads[1][1:]]
+    assert child_pids() <= before
     with pytest.raises(ValueError, match="workers"):
         IdealObserverReader(workers=0)
