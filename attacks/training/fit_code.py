@@ -31,15 +31,15 @@ class FitCode:
 
 FIT_CODE: dict[str, FitCode] = {
     "learned-reader": FitCode("attacks.readers.learned_reader", 1,
-                              "433d7814ac2122e6d34f76d41ec2cac867701178193074ca0a5ddedd62844886"),
+                              "7854da9a752c1f54d0147ed9094475743badcd1148dca2487a44a566849df71e"),
     "learned-reader-psf": FitCode("attacks.readers.learned_reader_psf", 1,
-                                  "23975e9381ce17274e7df9caf0d0fe5f39db7ada614ba17b9ac0ee8df302e494"),
+                                  "f5c23b2c87b28f68272fb32eac46f170b4cf532041d91bb95f65824ac741ab51"),
     "nafnet-known-pairs-tuned": FitCode("attacks.restorers.nafnet_known_pairs", 2,
-                                        "a35f9ca3a9f5bf4c9a9a9c35e4988b9d37accbf9fa394b655f8af768ea93da24"),
+                                        "791cd8754a638b0d9b5ab6bd0f7f8beeb9baf25a4ad354c70775dfb9d2cf99b3"),
     "nafnet-known-psf-tuned": FitCode("attacks.restorers.nafnet_known_pairs", 2,
-                                      "a35f9ca3a9f5bf4c9a9a9c35e4988b9d37accbf9fa394b655f8af768ea93da24"),
+                                      "791cd8754a638b0d9b5ab6bd0f7f8beeb9baf25a4ad354c70775dfb9d2cf99b3"),
     "nafnet-known-psf": FitCode("attacks.restorers.nafnet_known_psf", 1,
-                                "462d7f5fd9e1b970159daf0ef35aff8a93f4a3f27398dec90bfe6c836c75d20e"),
+                                "0c4aa6108c95ac2cf6439121cf45854abea61c7539ea55a92fe6cf4999eb00ca"),
 }
 
 

@@ -136,7 +136,7 @@ PSF_BUDGETS: dict[str, PsfPretrainBudget] = {
     # lenses, two of them held out (the sharp lenses had needed minutes of fine-tuning per lens): on the
     # eight held-out lenses the seventh went 29.38 -> 29.60 dB, the eighth 29.79, the ninth 29.89 (still rising).
     "full": PsfPretrainBudget(width=16, enc_blocks=(1, 1, 2), middle_blocks=2, dec_blocks=(1, 1, 1),
-                              max_steps=22500, batch_size=8, crop_px=128, pool_lenses=8, images_per_lens=6,
+                              max_steps=25000, batch_size=8, crop_px=128, pool_lenses=8, images_per_lens=6,
                               refresh_every=20, eval_every=250, heldout_lenses=6, patience_evals=4,
                               min_gain_db=0.05, cycle_steps=2500, sharp_share=0.25, sharp_from=15000,
                               heldout_sharp=2),
