@@ -131,10 +131,11 @@ PSF_BUDGETS: dict[str, PsfPretrainBudget] = {
     # The shipped pre-training (quick and paper profiles share it: a convolutional network is
     # size-agnostic and the PSFs are in sensor pixels either way).
     # Cosine cycles of 2,500 steps, each shipped (``nafnet-known-psf-full-s0``, ``-full5000-s0``, ...,
-    # ``-full22500-s0``) and continued from by the next; the fifth gained 0.09 dB held-out over the fourth
+    # ``-full25000-s0``) and continued from by the next; the fifth gained 0.09 dB held-out over the fourth
     # (28.18 -> 28.27 dB), the sixth 0.09 dB. From the seventh on a quarter of the draws are near-sharp
     # lenses, two of them held out (the sharp lenses had needed minutes of fine-tuning per lens): on the
-    # eight held-out lenses the seventh went 29.38 -> 29.60 dB, the eighth 29.79, the ninth 29.89 (still rising).
+    # eight held-out lenses the seventh went 29.38 -> 29.60 dB, the eighth 29.79, the ninth 29.89, the tenth
+    # 30.02 (still rising).
     "full": PsfPretrainBudget(width=16, enc_blocks=(1, 1, 2), middle_blocks=2, dec_blocks=(1, 1, 1),
                               max_steps=25000, batch_size=8, crop_px=128, pool_lenses=8, images_per_lens=6,
                               refresh_every=20, eval_every=250, heldout_lenses=6, patience_evals=4,
