@@ -63,6 +63,28 @@ def test_box_blur_scores_candidates_faster(benchmark, monkeypatch):
     assert speedup >= TARGET_SPEEDUP, f"box blur: {speedup:.2f}x the whole transform"
 
 
+def defocus_reader(workers: int) -> io.IdealObserverReader:
+    """A narrow search (beam 3, two sweeps) fitted to defocus, searching in `workers` processes; skips
+    where this machine has fewer than 2 CPUs."""
+    import os
+
+    if len(os.sched_getaffinity(0)) < 2:
+        pytest.skip("needs 2 CPUs")
+    reader = io.IdealObserverReader(beams=(3,), max_sweeps=2, workers=workers)
+    reader.fit(attacks.FitContext(lens=lenses.load("defocus")))
+    return reader
+
+
+def speedup_of(benchmark, runs: dict, slow: str, fast: str) -> float:
+    """How many times faster run `fast` is than run `slow` (alternating rounds), once both read the same."""
+    assert runs[slow]() == runs[fast]()
+    best = best_seconds(runs, 2)
+    benchmark.pedantic(runs[fast], rounds=1, iterations=1, warmup_rounds=0)
+    speedup = best[slow] / best[fast]
+    benchmark.extra_info.update({"speedup": speedup})
+    return speedup
+
+
 # Measured on the 2-core AMD EPYC (quiet, 2026-12-05): 4 plates of two images through defocus, 10.5-11.6 s in
 # one process, 7.1-7.3 s in two workers (1.5x; the boxes differ in cost, so the two workers do not finish together).
 TARGET_WORKERS_SPEEDUP = 1.3
@@ -70,54 +92,32 @@ TARGET_WORKERS_SPEEDUP = 1.3
 
 @pytest.mark.benchmark(group="ideal-observer")
 def test_two_workers_search_the_boxes_faster_than_one(benchmark):
-    import os
-
     from attacks.base import ReadHints
 
-    if len(os.sched_getaffinity(0)) < 2:
-        pytest.skip("needs 2 CPUs")
-    lens = lenses.load("defocus")
+    readers = {workers: defocus_reader(workers) for workers in (1, 2)}
     images = torch.rand(2, 3, 96, 256, generator=torch.Generator().manual_seed(0)) * 0.2 + 0.3  # noise, no plate
     hints = ReadHints(plate_boxes=[BOXES[:2], BOXES[1:]])
-    readers = {}
-    for workers in (1, 2):
-        readers[workers] = io.IdealObserverReader(beams=(3,), max_sweeps=2, workers=workers)
-        readers[workers].fit(attacks.FitContext(lens=lens))
     runs = {f"{w} worker(s)": (lambda r=r: r.read(images, hints)) for w, r in readers.items()}
-    assert runs["1 worker(s)"]() == runs["2 worker(s)"]()
-    best = best_seconds(runs, 2)
-    benchmark.pedantic(runs["2 worker(s)"], rounds=1, iterations=1, warmup_rounds=0)
-    speedup = best["1 worker(s)"] / best["2 worker(s)"]
-    benchmark.extra_info.update({"speedup": speedup})
+    speedup = speedup_of(benchmark, runs, "1 worker(s)", "2 worker(s)")
     assert speedup >= TARGET_WORKERS_SPEEDUP, f"two workers: {speedup:.2f}x one process"
 
 
 # Measured on the 2-core AMD EPYC (quiet, 2026-12-06): in a run, the cascade's windows come in batches of one
-# size, many of one window (measured here: 1.87x). Read batch by batch, a batch of one window searches in one process; in one
-# read_batches call every box shares the pool. In a fresh quick run --lens gp the cascade went from about 130 s
-# to 76 s on 61 plates.
+# size, many of one window. Read batch by batch, a batch of one window searches in one process; in one
+# read_batches call every box shares the pool (four one-window batches here: 1.87x). In a fresh quick
+# run --lens gp the cascade went from about 130 s to 76 s on 61 plates.
 TARGET_POOLED_SPEEDUP = 1.3
 
 
 @pytest.mark.benchmark(group="ideal-observer")
 def test_one_pool_over_every_batch_beats_a_pool_per_batch(benchmark):
-    import os
-
     from attacks.base import ReadHints
 
-    if len(os.sched_getaffinity(0)) < 2:
-        pytest.skip("needs 2 CPUs")
-    lens = lenses.load("defocus")
+    reader = defocus_reader(2)
     generator = torch.Generator().manual_seed(1)
     batches = [(torch.rand(1, 3, 96, 256, generator=generator) * 0.2 + 0.3, ReadHints(plate_boxes=[[box]]))
                for box in BOXES + BOXES[:1]]  # four windows, each a batch of its own
-    reader = io.IdealObserverReader(beams=(3,), max_sweeps=2, workers=2)
-    reader.fit(attacks.FitContext(lens=lens))
     runs = {"per batch": lambda: [reader.read(images, hints) for images, hints in batches],
             "pooled": lambda: reader.read_batches(batches)}
-    assert runs["per batch"]() == runs["pooled"]()
-    best = best_seconds(runs, 2)
-    benchmark.pedantic(runs["pooled"], rounds=1, iterations=1, warmup_rounds=0)
-    speedup = best["per batch"] / best["pooled"]
-    benchmark.extra_info.update({"speedup": speedup})
+    speedup = speedup_of(benchmark, runs, "per batch", "pooled")
     assert speedup >= TARGET_POOLED_SPEEDUP, f"one pool: {speedup:.2f}x a pool per batch"
