@@ -9,12 +9,15 @@ os-d-1000 plate windows both read the same strings, 37.7 s -> 10.6 s on the 2-co
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 import torch
 
 import attacks
 import lenses
+from attacks.base import ReadHints
 from attacks.readers import ideal_observer_reader as io
 from common.plate_render import random_plate_text
 from lenses.raw_likelihood import raw_mean_electrons
@@ -66,8 +69,6 @@ def test_box_blur_scores_candidates_faster(benchmark, monkeypatch):
 def defocus_reader(workers: int) -> io.IdealObserverReader:
     """A narrow search (beam 3, two sweeps) fitted to defocus, searching in `workers` processes; skips
     where this machine has fewer than 2 CPUs."""
-    import os
-
     if len(os.sched_getaffinity(0)) < 2:
         pytest.skip("needs 2 CPUs")
     reader = io.IdealObserverReader(beams=(3,), max_sweeps=2, workers=workers)
@@ -92,8 +93,6 @@ TARGET_WORKERS_SPEEDUP = 1.3
 
 @pytest.mark.benchmark(group="ideal-observer")
 def test_two_workers_search_the_boxes_faster_than_one(benchmark):
-    from attacks.base import ReadHints
-
     readers = {workers: defocus_reader(workers) for workers in (1, 2)}
     images = torch.rand(2, 3, 96, 256, generator=torch.Generator().manual_seed(0)) * 0.2 + 0.3  # noise, no plate
     hints = ReadHints(plate_boxes=[BOXES[:2], BOXES[1:]])
@@ -111,8 +110,6 @@ TARGET_POOLED_SPEEDUP = 1.3
 
 @pytest.mark.benchmark(group="ideal-observer")
 def test_one_pool_over_every_batch_beats_a_pool_per_batch(benchmark):
-    from attacks.base import ReadHints
-
     reader = defocus_reader(2)
     generator = torch.Generator().manual_seed(1)
     batches = [(torch.rand(1, 3, 96, 256, generator=generator) * 0.2 + 0.3, ReadHints(plate_boxes=[[box]]))
